@@ -1,0 +1,1 @@
+"""servoscope.markers"""
