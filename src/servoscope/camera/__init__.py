@@ -1,5 +1,6 @@
-"""Camera models: intrinsics, Brown–Conrady lens distortion, point (un)distortion."""
+"""Camera models: intrinsics, Brown–Conrady lens distortion, point (un)distortion, calibration."""
 
+from .calibrate import CalibrationResult, calibrate, parse_board
 from .model import CameraModel
 
-__all__ = ["CameraModel"]
+__all__ = ["CalibrationResult", "CameraModel", "calibrate", "parse_board"]

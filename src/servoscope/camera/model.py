@@ -130,8 +130,17 @@ class CameraModel:
     def undistort_points(self, points_px: np.ndarray, *, tolerance_px: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
         """Map recorded (distorted) pixel coordinates to ideal ones.
 
-        Uses OpenCV's iterative inverse (``cv2.undistortPointsIter``), then
-        checks convergence by distorting the answer again.
+        Uses OpenCV's iterative inverse (``cv2.undistortPointsIter`` in
+        OpenCV 4, ``cv2.undistortPoints`` with a ``criteria`` argument in
+        OpenCV 5; up to 100 iterations), then checks convergence by
+        distorting the answer again. See also :meth:`in_valid_region`.
+
+        Parameters
+        ----------
+        points_px : ndarray, shape (n, 2)
+            Points in the recorded (distorted) image, pixels.
+        tolerance_px : float, optional
+            Convergence tolerance of the iteration, pixels.
 
         Returns
         -------
@@ -158,4 +167,62 @@ class CameraModel:
         converged = np.isfinite(miss) & (miss < max(1e3 * tolerance_px, 1e-3))
         return und, converged
 
+    @property
+    def monotonic_radius(self) -> float:
+        """Normalized radius up to which the radial distortion is one-to-one.
 
+        The radial model ``r_d = r (1 + k1 r² + k2 r⁴ + k3 r⁶)`` folds back
+        where ``d r_d / d r = 1 + 3 k1 r² + 5 k2 r⁴ + 7 k3 r⁶`` first reaches
+        zero; beyond that radius (in normalized coordinates, i.e. pixels /
+        focal length) an undistorted point is not unique and the model has
+        no physical meaning. Tangential terms are ignored here.
+
+        Returns
+        -------
+        float
+            The smallest positive fold radius, or ``inf`` when there is none.
+        """
+        k1, k2, _p1, _p2, k3 = self.dist_coeffs
+        # Polynomial in u = r², highest power first, leading zeros dropped.
+        coeffs = np.trim_zeros(np.array([7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]), "f")
+        if coeffs.size <= 1:
+            return float("inf")
+        roots = np.roots(coeffs)
+        u = roots[(np.abs(roots.imag) <= 1e-12 * np.maximum(1.0, np.abs(roots.real))) & (roots.real > 0)].real
+        return float(np.sqrt(u.min())) if u.size else float("inf")
+
+    def in_valid_region(self, points_px: np.ndarray, *, margin: float = 0.1) -> np.ndarray:
+        """Flag recorded points where the calibrated model can be trusted.
+
+        A point is valid when it lies inside the image enlarged by ``margin``
+        × width (resp. height) on each side, its undistortion converges (see
+        :meth:`undistort_points`) and its undistorted radius is below
+        :attr:`monotonic_radius`. Far outside the calibrated field of view
+        a polynomial lens model extrapolates wildly even where it inverts.
+
+        Parameters
+        ----------
+        points_px : ndarray, shape (n, 2)
+            Points in the recorded (distorted) image, pixels.
+        margin : float, optional
+            Allowed excursion beyond the image border, as a fraction of the
+            image width and height (0.1 = 10 %).
+
+        Returns
+        -------
+        ndarray of bool, shape (n,)
+        """
+        pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+        w, h = self.image_size
+        mx, my = margin * w, margin * h
+        inside = (
+            np.isfinite(pts).all(axis=1)
+            & (pts[:, 0] >= -0.5 - mx) & (pts[:, 0] <= w - 0.5 + mx)
+            & (pts[:, 1] >= -0.5 - my) & (pts[:, 1] <= h - 0.5 + my)
+        )
+        if not self.has_distortion or not inside.any():
+            return inside
+        und, converged = self.undistort_points(np.where(inside[:, None], pts, 0.0))
+        k = self.camera_matrix
+        r = np.hypot((und[:, 0] - k[0, 2]) / k[0, 0], (und[:, 1] - k[1, 2]) / k[1, 1])
+        return inside & converged & (r < self.monotonic_radius)

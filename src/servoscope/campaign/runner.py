@@ -1,0 +1,276 @@
+"""Running a campaign: track every video, fit every dwell, identify the model.
+
+Stages run in the pipeline's order (video → markers → camera → angles →
+sysid) and the result carries every intermediate, so that a report, a
+notebook or a test can look at any of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._io import jsonable, write_json_atomic, write_text_atomic
+from ..errors import ServoscopeError
+from ..markers.tracker import Track, TrackerSettings, track_video
+from ..sysid import (
+    FrequencyResponse,
+    SineFit,
+    StepAnalysis,
+    TransferFunctionFit,
+    analyse_step,
+    fit_second_order,
+    fit_sine,
+)
+from .manifest import Campaign, TestSpec, load_campaign
+
+__all__ = ["IdentificationResult", "identify", "track_campaign"]
+
+ProgressFn = Callable[[str, int, int], None]
+
+
+def _settings(campaign: Campaign) -> TrackerSettings:
+    return TrackerSettings(
+        lead=campaign.lead,
+        trail=campaign.trail,
+        led=campaign.led,
+        camera=campaign.camera,
+        exposure_s=campaign.exposure_s,
+    )
+
+
+def track_campaign(campaign: Campaign, *, progress: ProgressFn | None = None) -> dict[str, Track]:
+    """Track every video of a campaign, in manifest order.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    progress : callable(label, frames_done, test_index), optional
+
+    Returns
+    -------
+    dict of label → Track
+    """
+    settings = _settings(campaign)
+    tracks: dict[str, Track] = {}
+    for i, test in enumerate(campaign.tests):
+        callback = None
+        if progress is not None:
+            callback = lambda done, _label=test.label, _i=i: progress(_label, done, _i)  # noqa: E731
+        tracks[test.label] = track_video(test.video, settings, progress=callback)
+    return tracks
+
+
+def _t0(test: TestSpec, track: Track) -> float | None:
+    # A t0 typed in the manifest wins: the user knows something the LED does not.
+    return test.t0_s if test.t0_s is not None else track.t0_s
+
+
+@dataclass
+class IdentificationResult:
+    """Everything one identification produced.
+
+    Attributes
+    ----------
+    campaign : Campaign
+    tracks : dict of label → Track
+    sine_fits : dict of label → SineFit
+    frequency_response : FrequencyResponse
+    model : TransferFunctionFit
+        The fitted 2nd-order model (magnitude fit, the paper's eq. 6).
+    step : StepAnalysis or None
+        The step test, with the dead time fitted against the model.
+    step_label : str or None
+    warnings : list of str
+    """
+
+    campaign: Campaign
+    tracks: dict[str, Track]
+    sine_fits: dict[str, SineFit]
+    frequency_response: FrequencyResponse
+    model: TransferFunctionFit
+    step: StepAnalysis | None = None
+    step_label: str | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def transfer_function(self):
+        """The identified model as a python-control TransferFunction (without the delay)."""
+        return self.model.transfer_function
+
+    @property
+    def dead_time_s(self) -> float | None:
+        if self.step is None or self.step.dead_time_s is None or not math.isfinite(self.step.dead_time_s):
+            return None
+        return float(self.step.dead_time_s)
+
+    def summary(self) -> dict:
+        """The content of ``result.json``: plain types only."""
+        model = dict(jsonable(self.model.summary()))
+        model["dead_time_s"] = self.dead_time_s
+        model["dead_time_source"] = "step test (model-based fit from the LED switch)" if self.dead_time_s is not None else None
+        tests = []
+        for test in self.campaign.tests:
+            track = self.tracks[test.label]
+            entry = {
+                "label": test.label,
+                "video": test.video.name,
+                "kind": test.kind,
+                "frequency_hz": test.frequency_hz,
+                "amplitude": test.amplitude,
+                "frames": track.n_frames,
+                "valid_frames": track.n_valid,
+                "t0_s": _t0(test, track),
+                "t0_uncertainty_s": track.t0_uncertainty_s if test.t0_s is None else 0.0,
+                "warnings": list(track.warnings),
+            }
+            fit = self.sine_fits.get(test.label)
+            if fit is not None:
+                entry["sine_fit"] = jsonable(fit.summary())
+                entry["warnings"] += list(fit.warnings)
+            tests.append(entry)
+        return jsonable(
+            {
+                "servoscope_version": _version(),
+                "campaign": str(self.campaign.path),
+                "input_units": self.campaign.input_units,
+                "output_units": "rad",
+                "model": model,
+                "bandwidth_rad_s": self.model.bandwidth_rad_s,
+                "bandwidth_hz": self.model.bandwidth_rad_s / (2 * math.pi),
+                "dead_time_s": self.dead_time_s,
+                "frequency_response": self.frequency_response.summary(),
+                "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
+                "tests": tests,
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def write(self, out_dir: str | Path) -> dict[str, Path]:
+        """Write result.json, report.html, frequency_response.csv and tracks/<label>.csv.
+
+        Returns
+        -------
+        dict of name → path written
+        """
+        from ..report.build import build_report  # deferred: matplotlib is slow to import
+
+        out = Path(out_dir)
+        (out / "tracks").mkdir(parents=True, exist_ok=True)
+        paths = {}
+        for label, track in self.tracks.items():
+            p = out / "tracks" / f"{label}.csv"
+            track.to_csv(p)
+        paths["tracks"] = out / "tracks"
+        paths["frequency_response"] = out / "frequency_response.csv"
+        self.frequency_response.to_csv(paths["frequency_response"])
+        paths["report"] = out / "report.html"
+        write_text_atomic(paths["report"], build_report(self))
+        # result.json last: its presence says the run finished.
+        paths["result"] = out / "result.json"
+        write_json_atomic(paths["result"], self.summary())
+        return paths
+
+    def _repr_html_(self) -> str:
+        m = self.model
+        dt = "—" if self.dead_time_s is None else f"{1e3 * self.dead_time_s:.1f} ms"
+        return (
+            "<table><tr><th>K</th><th>ωn (rad/s)</th><th>ζ</th><th>bandwidth (rad/s)</th><th>dead time</th></tr>"
+            f"<tr><td>{m.gain:.4g}</td><td>{m.natural_frequency_rad_s:.4g}</td><td>{m.damping_ratio:.3g}</td>"
+            f"<td>{m.bandwidth_rad_s:.4g}</td><td>{dt}</td></tr></table>"
+        )
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return __version__
+
+
+def identify(
+    campaign: Campaign | str | Path,
+    *,
+    tracks: dict[str, Track] | None = None,
+    progress: ProgressFn | None = None,
+) -> IdentificationResult:
+    """Identify a campaign: tracks → sine fits → frequency response → model → step check.
+
+    Parameters
+    ----------
+    campaign : Campaign or path to campaign.toml
+    tracks : dict of label → Track, optional
+        Reuse tracks already computed (tracking is the expensive part).
+    progress : callable(label, frames_done, test_index), optional
+
+    Returns
+    -------
+    IdentificationResult
+
+    Raises
+    ------
+    ServoscopeError
+        When the manifest or a video is bad, or too few dwells could be fitted.
+    """
+    if not isinstance(campaign, Campaign):
+        campaign = load_campaign(campaign)
+    if tracks is None:
+        tracks = track_campaign(campaign, progress=progress)
+    warnings: list[str] = []
+    fits: dict[str, SineFit] = {}
+    amplitudes = []
+    for test in campaign.sine_tests:
+        track = tracks[test.label]
+        t0 = _t0(test, track)
+        if t0 is None:
+            warnings.append(f"{test.label}: no input start (LED or t0_s): phase unknown, steady state taken from the first frame")
+        if track.n_valid < 5:
+            warnings.append(f"{test.label}: only {track.n_valid} valid frames; dwell left out")
+            continue
+        try:
+            fit = fit_sine(
+                track.time_s,
+                track.angle_rad,
+                test.frequency_hz,
+                t0_s=t0,
+                settle_s=campaign.settle_s,
+                valid=track.valid,
+            )
+        except ServoscopeError as exc:
+            warnings.append(f"{test.label}: dwell left out: {exc}")
+            continue
+        fits[test.label] = fit
+        amplitudes.append(test.amplitude)
+    if len(fits) < 3:
+        raise ServoscopeError(
+            f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
+        )
+    fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
+    model = fit_second_order(fr)
+
+    step = None
+    step_label = None
+    if campaign.step_tests:
+        test = campaign.step_tests[0]
+        track = tracks[test.label]
+        t0 = _t0(test, track)
+        if t0 is None:
+            warnings.append(f"{test.label}: step test without an input start (LED or t0_s): dead time not measured")
+        elif track.n_valid < 10:
+            warnings.append(f"{test.label}: step test has only {track.n_valid} valid frames")
+        else:
+            step = analyse_step(
+                track.time_s,
+                track.angle_rad,
+                t0_s=t0,
+                step_size=test.amplitude,
+                valid=track.valid,
+                model=model.transfer_function,
+            )
+            step_label = test.label
+        if len(campaign.step_tests) > 1:
+            warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
+    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings)

@@ -1,0 +1,230 @@
+"""The ``servoscope`` command: a thin layer over the Python API.
+
+Exit codes: 0 done; 2 bad input (one line on stderr, ``servoscope: error: …``);
+1 an internal error.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import click
+
+from .errors import ServoscopeError
+
+__all__ = ["main", "cli"]
+
+
+def _progress_enabled(quiet: bool) -> bool:
+    return not quiet and sys.stderr.isatty()
+
+
+class _Progress:
+    """A rich progress bar over a campaign's videos, or nothing."""
+
+    def __init__(self, enabled: bool, tests):
+        self.enabled = enabled
+        self.tests = list(tests)
+        self._bar = None
+
+    def __enter__(self):
+        if self.enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self._bar = Progress(
+                TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} videos"),
+                TimeRemainingColumn(), transient=True,
+            )
+            self._bar.__enter__()
+            self._task = self._bar.add_task("tracking", total=len(self.tests))
+        return self
+
+    def __call__(self, label: str, frames_done: int, index: int) -> None:
+        if self._bar is not None:
+            self._bar.update(self._task, completed=index, description=f"tracking {label} ({frames_done} frames)")
+
+    def __exit__(self, *exc):
+        if self._bar is not None:
+            self._bar.update(self._task, completed=len(self.tests))
+            self._bar.__exit__(*exc)
+        return False
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="servoscope", prog_name="servoscope")
+def cli() -> None:
+    """Measure an actuator's transfer function from video of two coloured markers."""
+
+
+@cli.command()
+@click.argument("outdir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--preset", default="paper", show_default=True, help="Campaign preset (paper, quick).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Random seed: same seed, same footage.")
+def simulate(outdir: Path, preset: str, seed: int) -> None:
+    """Render a campaign with a known answer (the digital twin) into OUTDIR."""
+    from .simulate import simulate_campaign
+
+    manifest = simulate_campaign(outdir, preset=preset, seed=seed)
+    click.echo(f"wrote {manifest}")
+
+
+@cli.command()
+@click.argument("video", type=click.Path(path_type=Path))
+@click.option("--lead", default="#d62728", show_default=True, help="Leading-edge marker colour (#rrggbb, CSS name, auto).")
+@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour.")
+@click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
+@click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
+@click.option("--exposure", "exposure_s", type=float, help="Exposure time in seconds (for the LED's sub-frame timing).")
+@click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Track CSV to write.")
+def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None, out_csv: Path) -> None:
+    """Track the two markers through VIDEO and write the per-frame angles."""
+    from .camera import CameraModel
+    from .markers import TrackerSettings, parse_colour, track_video
+
+    for spec, what in ((lead, "--lead"), (trail, "--trail")):
+        parse_colour(spec, what=what)
+    led_spec = None if led.lower() == "none" else led
+    if led_spec:
+        parse_colour(led_spec, what="--led")
+    camera = CameraModel.load(calibration) if calibration else None
+    if exposure_s is not None and not exposure_s > 0:
+        raise ServoscopeError(f"--exposure must be > 0, got {exposure_s}")
+    result = track_video(video, TrackerSettings(lead, trail, led_spec, camera, exposure_s))
+    out_csv.parent.mkdir(parents=True, exist_ok=True)
+    result.to_csv(out_csv)
+    t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s"
+    click.echo(f"{video.name}: {result.n_valid}/{result.n_frames} valid frames, input start t0 = {t0}; wrote {out_csv}")
+    for w in result.warnings:
+        click.echo(f"warning: {w}", err=True)
+
+
+@cli.command()
+@click.argument("campaign", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder for result.json, report.html, tracks/.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
+def identify(campaign: Path, out_dir: Path, quiet: bool, as_json: bool) -> None:
+    """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
+    from .campaign import identify as run_identify
+    from .campaign import load_campaign
+
+    manifest = load_campaign(campaign)  # validates everything before --out is touched
+    with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+        result = run_identify(manifest, progress=progress)
+    paths = result.write(out_dir)
+    if as_json:
+        click.echo(json.dumps(result.summary(), indent=2))
+    elif not quiet:
+        _print_model(result)
+        click.echo(f"report: {paths['report']}")
+
+
+def _print_model(result, truth: dict | None = None) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    m = result.model
+    table = Table(title="Identified model: G(s) = K·ωn² / (s² + 2ζωn·s + ωn²) · e^(−sτ)")
+    table.add_column("quantity")
+    table.add_column("identified", justify="right")
+    table.add_column("± std. error", justify="right")
+    if truth is not None:
+        table.add_column("truth", justify="right")
+        table.add_column("error", justify="right")
+    dead = result.dead_time_s
+    step = result.step
+    rows = [
+        ("gain K", m.gain, m.gain_stderr, truth and truth["model"]["gain"], "rel"),
+        ("natural frequency ωn (rad/s)", m.natural_frequency_rad_s, m.natural_frequency_stderr_rad_s, truth and truth["model"]["natural_frequency_rad_s"], "rel"),
+        ("damping ratio ζ", m.damping_ratio, m.damping_ratio_stderr, truth and truth["model"]["damping_ratio"], "rel"),
+        ("bandwidth (rad/s)", m.bandwidth_rad_s, None, truth and truth["bandwidth_rad_s"], "rel"),
+        ("dead time τ (ms)", None if dead is None else 1e3 * dead, None if step is None or step.dead_time_stderr_s is None else 1e3 * step.dead_time_stderr_s, truth and 1e3 * truth["model"]["dead_time_s"], "abs"),
+    ]
+    for name, value, err, true, kind in rows:
+        cells = [name, _fmt(value), _fmt(err)]
+        if truth is not None:
+            if value is None or true is None:
+                diff = "—"
+            elif kind == "rel":
+                diff = f"{100 * (value - true) / true:+.2f} %"
+            else:
+                diff = f"{value - true:+.2f} ms"
+            cells += [_fmt(true), diff]
+        table.add_row(*cells)
+    Console(highlight=False).print(table)
+
+
+def _fmt(value) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    return f"{value:.4g}"
+
+
+@cli.command()
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("demo-out"), show_default=True)
+@click.option("--preset", default="paper", show_default=True)
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("--quiet", is_flag=True)
+def demo(out_dir: Path, preset: str, seed: int, quiet: bool) -> None:
+    """Simulate the paper's campaign, identify it, and compare with the truth."""
+    from .campaign import identify as run_identify
+    from .campaign import load_campaign
+    from .simulate import simulate_campaign
+
+    click.echo(f"rendering the '{preset}' campaign (digital twin) into {out_dir / 'campaign'} …")
+    manifest_path = simulate_campaign(out_dir / "campaign", preset=preset, seed=seed)
+    manifest = load_campaign(manifest_path)
+    click.echo(f"tracking {len(manifest.tests)} videos and identifying …")
+    with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+        result = run_identify(manifest, progress=progress)
+    paths = result.write(out_dir / "result")
+    truth = json.loads((manifest_path.parent / "truth.json").read_text())
+    _print_model(result, truth)
+    click.echo(f"report: {paths['report']}")
+    click.echo(f"result: {paths['result']}")
+
+
+@cli.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--board", required=True, help="Inner corners of the chessboard, COLSxROWS, e.g. 9x6.")
+@click.option("--square", "square_size", default=1.0, show_default=True, type=float, help="Square size (any unit).")
+@click.option("--out", "out_json", required=True, type=click.Path(dir_okay=False, path_type=Path), help="camera.json to write.")
+def calibrate(inputs: tuple[Path, ...], board: str, square_size: float, out_json: Path) -> None:
+    """Calibrate the camera from chessboard photos or videos (INPUTS)."""
+    from .camera.calibrate import calibrate as run_calibrate
+    from .camera.calibrate import parse_board
+
+    result = run_calibrate(list(inputs), parse_board(board), square_size=square_size)
+    out_json.parent.mkdir(parents=True, exist_ok=True)
+    result.save(out_json)
+    click.echo(f"{len(result.views_used)} views used, RMS reprojection error {result.rms_reprojection_error_px:.3f} px; wrote {out_json}")
+    for name, reason in result.skipped:
+        click.echo(f"skipped {name}: {reason}", err=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: runs the command and maps errors to exit codes."""
+    try:
+        cli.main(args=argv, prog_name="servoscope", standalone_mode=False)
+    except ServoscopeError as exc:
+        click.echo(f"servoscope: error: {exc}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("servoscope: interrupted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        click.echo(f"servoscope: error: {exc.format_message()}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        click.echo("servoscope: interrupted", err=True)
+        sys.exit(130)
+    except Exception as exc:  # an internal error: say so in one line, traceback on request
+        if os.environ.get("SERVOSCOPE_DEBUG"):
+            raise
+        click.echo(f"servoscope: internal error: {type(exc).__name__}: {exc} (set SERVOSCOPE_DEBUG=1 for the traceback)", err=True)
+        sys.exit(1)
+    sys.exit(0)

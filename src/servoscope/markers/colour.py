@@ -1,0 +1,111 @@
+"""Marker colours: parsing what the user wrote, and learning what the camera saw.
+
+A given colour is only a seed. After lighting, white balance and the codec the
+recorded sticker differs, so the tracker measures each marker's actual colour
+on the footage (:class:`ColourModel`) and segments with that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from matplotlib import colors as mcolors
+
+from ..errors import ServoscopeError
+
+__all__ = ["AUTO", "parse_colour", "ColourModel", "hsv_of_rgb"]
+
+AUTO = "auto"
+
+
+def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, float] | str:
+    """Parse ``"#rrggbb"``, a CSS colour name or ``"auto"``.
+
+    Returns
+    -------
+    (r, g, b) in 0–255, or the string ``"auto"``.
+
+    Raises
+    ------
+    ServoscopeError
+        For anything else; the message names ``what``.
+    """
+    if not isinstance(spec, str):
+        raise ServoscopeError(f"{what}: expected a colour string like \"#d62728\", \"red\" or \"auto\", got {spec!r}")
+    text = spec.strip().lower()
+    if text == AUTO:
+        return AUTO
+    try:
+        if text.startswith("#"):
+            if len(text) != 7:
+                raise ValueError
+            rgb = mcolors.to_rgb(text)
+        elif text in mcolors.CSS4_COLORS:
+            rgb = mcolors.to_rgb(mcolors.CSS4_COLORS[text])
+        else:
+            raise ValueError
+    except ValueError:
+        raise ServoscopeError(
+            f"{what}: {spec!r} is not a colour (use \"#rrggbb\", a CSS colour name, or \"auto\")"
+        ) from None
+    return tuple(float(c) * 255.0 for c in rgb)  # type: ignore[return-value]
+
+
+def hsv_of_rgb(rgb: np.ndarray) -> np.ndarray:
+    """OpenCV HSV (H in 0–180, S and V in 0–255) of RGB uint8 pixels, any shape (..., 3)."""
+    arr = np.ascontiguousarray(np.asarray(rgb, dtype=np.uint8).reshape(-1, 1, 3))
+    return cv2.cvtColor(arr, cv2.COLOR_RGB2HSV).reshape(np.shape(rgb))
+
+
+@dataclass(frozen=True)
+class ColourModel:
+    """A hue band with saturation and value floors, in OpenCV's HSV units.
+
+    Hue is circular (0–180 in OpenCV's 8-bit HSV), so a red marker whose hue
+    straddles 0 is one band, not two.
+
+    Attributes
+    ----------
+    rgb : (r, g, b)
+        Representative colour, 0–255.
+    hue : float
+        Centre of the band, 0–180.
+    hue_halfwidth : float
+    min_saturation, min_value : float
+        0–255.
+    """
+
+    rgb: tuple[float, float, float]
+    hue: float
+    hue_halfwidth: float
+    min_saturation: float
+    min_value: float
+
+    @classmethod
+    def from_seed(cls, rgb: tuple[float, float, float]) -> "ColourModel":
+        """A permissive model around a user-given colour, for the first detection."""
+        h, s, v = hsv_of_rgb(np.array(rgb, dtype=np.float64).round().clip(0, 255).astype(np.uint8)).ravel()
+        return cls(tuple(rgb), float(h), 12.0, max(40.0, 0.35 * float(s)), max(30.0, 0.25 * float(v)))
+
+    @classmethod
+    def learn(cls, pixels_rgb: np.ndarray) -> "ColourModel":
+        """Fit the band to a detected marker's core pixels, shape (n, 3) uint8."""
+        hsv = hsv_of_rgb(pixels_rgb).reshape(-1, 3).astype(np.float64)
+        angle = hsv[:, 0] * (np.pi / 90.0)
+        mean_angle = np.arctan2(np.sin(angle).mean(), np.cos(angle).mean())
+        hue = (mean_angle * 90.0 / np.pi) % 180.0
+        spread = np.abs(((hsv[:, 0] - hue + 90.0) % 180.0) - 90.0)
+        halfwidth = float(np.clip(3.0 * np.percentile(spread, 90), 6.0, 20.0))
+        s_med = float(np.median(hsv[:, 1]))
+        v_med = float(np.median(hsv[:, 2]))
+        rgb = tuple(float(c) for c in np.median(np.asarray(pixels_rgb, dtype=np.float64).reshape(-1, 3), axis=0))
+        return cls(rgb, float(hue), halfwidth, max(30.0, 0.45 * s_med), max(25.0, 0.35 * v_med))
+
+    def mask(self, rgb: np.ndarray) -> np.ndarray:
+        """Binary membership of RGB uint8 pixels, shape (..., 3) → (...) bool."""
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV) if rgb.ndim == 3 else hsv_of_rgb(rgb)
+        h = hsv[..., 0].astype(np.int16)
+        dh = np.abs(((h - int(round(self.hue)) + 90) % 180) - 90)
+        return (dh <= self.hue_halfwidth) & (hsv[..., 1] >= self.min_saturation) & (hsv[..., 2] >= self.min_value)

@@ -1,0 +1,567 @@
+"""Tracking two coloured markers (and a status LED) through a video.
+
+Per frame: find each marker's blob by colour inside a window around its
+predicted position (the whole frame when lost), then measure its centroid
+from a *soft* membership: each pixel's colour is unmixed between the marker's
+colour and the local background's, so a pixel half covered by the sticker
+counts one half. That makes the centroid subpixel, where a binary threshold
+(the paper's flag) moves by whole pixels as edge pixels flip.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from ..camera.model import CameraModel
+from ..errors import ServoscopeError
+from ..video.reader import iter_frames, probe_video
+from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
+from .moments import Moments, weighted_moments
+
+__all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids"]
+
+_KERNEL3 = np.ones((3, 3), np.uint8)
+
+
+def angle_rad_from_centroids(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray) -> np.ndarray:
+    """Angle of the line from the trailing to the leading marker.
+
+    θ = atan2(y_trail − y_lead, x_lead − x_trail) in image coordinates (y down),
+    so counter-clockwise as seen in the image is positive.
+    """
+    lead = np.asarray(lead_xy_px, dtype=np.float64).reshape(-1, 2)
+    trail = np.asarray(trail_xy_px, dtype=np.float64).reshape(-1, 2)
+    return np.arctan2(trail[:, 1] - lead[:, 1], lead[:, 0] - trail[:, 0])
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """How to track one video.
+
+    Attributes
+    ----------
+    lead, trail : str
+        Marker colours: ``"#rrggbb"``, a CSS name, or ``"auto"``.
+    led : str or None
+        LED colour; None when the footage has no LED.
+    camera : CameraModel or None
+        When given, centroids are undistorted before angles are computed.
+    exposure_s : float or None
+        Exposure time, for the LED's sub-frame switch time; None assumes the
+        exposure lasts the whole frame interval.
+    search_radius_px : float
+        Half-size of the search window beyond the marker's own extent.
+    """
+
+    lead: str = "#d62728"
+    trail: str = "#2ca02c"
+    led: str | None = "#ffd400"
+    camera: CameraModel | None = None
+    exposure_s: float | None = None
+    search_radius_px: float = 24.0
+
+
+@dataclass
+class Track:
+    """Per-frame measurements of one video.
+
+    Arrays have one entry per decoded frame. Coordinates are pixels in the
+    ideal (undistorted) image when a camera model was given, else in the
+    recorded image.
+
+    Attributes
+    ----------
+    video : str
+    frame : ndarray of int
+    time_s : ndarray
+        Presentation times from the video's PTS.
+    lead_xy_px, trail_xy_px : ndarray, shape (n, 2)
+        Centroids; NaN where not found.
+    lead_area_px, trail_area_px : ndarray
+        Soft areas (m00).
+    angle_rad : ndarray
+        θ = atan2(y_trail − y_lead, x_lead − x_trail), unwrapped; NaN where invalid.
+    valid : ndarray of bool
+    reason : list of str
+        Why a frame is invalid ("" when valid).
+    led_level : ndarray
+        LED brightness normalised to 1 lit, 0 off; NaN without an LED.
+    t0_s : float or None
+        LED switch-off time (the input's start), sub-frame.
+    t0_uncertainty_s : float or None
+    warnings : list of str
+    snapshot_rgb : ndarray or None
+        One frame, for drawing the detected centroids on it.
+    snapshot_index : int
+    """
+
+    video: str
+    frame: np.ndarray
+    time_s: np.ndarray
+    lead_xy_px: np.ndarray
+    trail_xy_px: np.ndarray
+    lead_area_px: np.ndarray
+    trail_area_px: np.ndarray
+    angle_rad: np.ndarray
+    valid: np.ndarray
+    reason: list[str]
+    led_level: np.ndarray
+    t0_s: float | None = None
+    t0_uncertainty_s: float | None = None
+    warnings: list[str] = field(default_factory=list)
+    snapshot_rgb: np.ndarray | None = None
+    snapshot_index: int = 0
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frame.size)
+
+    @property
+    def n_valid(self) -> int:
+        return int(np.count_nonzero(self.valid))
+
+    def summary(self) -> dict:
+        """Plain-typed summary."""
+        return {
+            "video": self.video,
+            "frames": self.n_frames,
+            "valid_frames": self.n_valid,
+            "t0_s": self.t0_s,
+            "t0_uncertainty_s": self.t0_uncertainty_s,
+            "warnings": list(self.warnings),
+        }
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The per-frame table as a dict of columns (pandas-free)."""
+        return {
+            "frame": self.frame,
+            "time_s": self.time_s,
+            "angle_rad": self.angle_rad,
+            "valid": self.valid.astype(np.int64),
+            "lead_x_px": self.lead_xy_px[:, 0],
+            "lead_y_px": self.lead_xy_px[:, 1],
+            "trail_x_px": self.trail_xy_px[:, 0],
+            "trail_y_px": self.trail_xy_px[:, 1],
+            "lead_area_px": self.lead_area_px,
+            "trail_area_px": self.trail_area_px,
+            "led_level": self.led_level,
+        }
+
+    def to_pandas(self):
+        """The per-frame table as a pandas DataFrame (pandas is optional)."""
+        try:
+            import pandas as pd
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise ImportError("Track.to_pandas() needs pandas: pip install pandas") from exc
+        df = pd.DataFrame(self.columns())
+        df["reason"] = self.reason
+        return df
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write the per-frame table (``frame,time_s,angle_rad,valid,…``)."""
+        cols = self.columns()
+        names = list(cols) + ["reason"]
+        lines = [",".join(names)]
+        for i in range(self.n_frames):
+            row = []
+            for name in names[:-1]:
+                value = cols[name][i]
+                if name in ("frame", "valid"):
+                    row.append(str(int(value)))
+                elif np.isnan(value):
+                    row.append("")
+                else:
+                    row.append(repr(float(value)))
+            row.append(self.reason[i].replace(",", ";"))
+            lines.append(",".join(row))
+        Path(path).write_text("\n".join(lines) + "\n")
+
+
+@dataclass
+class _Blob:
+    moments: Moments
+    bbox: tuple[int, int, int, int]  # x0, y0, x1, y1 (exclusive) in image coordinates
+    colour_rgb: np.ndarray
+
+
+class _MarkerTracker:
+    """State of one marker: its learned colour, size and last position."""
+
+    def __init__(self, name: str, spec: tuple[float, float, float] | str, search_radius_px: float):
+        self.name = name
+        self.seed = spec
+        self.model: ColourModel | None = None if spec == AUTO else ColourModel.from_seed(spec)  # type: ignore[arg-type]
+        self.expected_area: float | None = None
+        self.last_xy: np.ndarray | None = None
+        self.velocity = np.zeros(2)
+        self.search_radius_px = search_radius_px
+        self.extent_px = 10.0
+
+    # -- detection ---------------------------------------------------------
+    def _components(self, rgb: np.ndarray, window: tuple[int, int, int, int]):
+        x0, y0, x1, y1 = window
+        mask = self.model.mask(rgb[y0:y1, x0:x1]).astype(np.uint8)  # type: ignore[union-attr]
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        return labels, stats[1:], n - 1
+
+    def find(self, rgb: np.ndarray) -> tuple[_Blob | None, str]:
+        h, w = rgb.shape[:2]
+        predicted = None if self.last_xy is None else self.last_xy + self.velocity
+        windows = []
+        if predicted is not None:
+            r = self.search_radius_px + self.extent_px
+            x0 = int(max(0, math.floor(predicted[0] - r)))
+            y0 = int(max(0, math.floor(predicted[1] - r)))
+            x1 = int(min(w, math.ceil(predicted[0] + r) + 1))
+            y1 = int(min(h, math.ceil(predicted[1] + r) + 1))
+            if x1 - x0 > 2 and y1 - y0 > 2:
+                windows.append((x0, y0, x1, y1))
+        windows.append((0, 0, w, h))  # fall back to the whole frame when lost
+        for window in windows:
+            labels, stats, n = self._components(rgb, window)
+            if n == 0:
+                continue
+            areas = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
+            ok = areas >= 4
+            if self.expected_area is not None:
+                ok &= (areas >= 0.25 * self.expected_area) & (areas <= 4.0 * self.expected_area)
+            if not ok.any():
+                continue
+            candidates = np.flatnonzero(ok)
+            if predicted is not None:
+                centres = stats[candidates, :2] + stats[candidates, 2:4] / 2.0 + np.array(window[:2])
+                best = candidates[np.argmin(np.hypot(*(centres - predicted).T))]
+            else:
+                best = candidates[np.argmax(areas[candidates])]
+            blob = self._refine(rgb, window, labels == best + 1)
+            if blob is not None:
+                return blob, ""
+        return None, f"{self.name} marker not found"
+
+    def _refine(self, rgb: np.ndarray, window, component: np.ndarray) -> _Blob | None:
+        ys, xs = np.nonzero(component)
+        pad = 8
+        h, w = rgb.shape[:2]
+        x0 = max(0, window[0] + xs.min() - pad)
+        y0 = max(0, window[1] + ys.min() - pad)
+        x1 = min(w, window[0] + xs.max() + pad + 1)
+        y1 = min(h, window[1] + ys.max() + pad + 1)
+        roi = rgb[y0:y1, x0:x1].astype(np.float64)
+        comp = np.zeros(roi.shape[:2], np.uint8)
+        comp[ys + window[1] - y0, xs + window[0] - x0] = 1
+        core = cv2.erode(comp, _KERNEL3)
+        if core.sum() < 3:
+            core = comp
+        marker_rgb = np.median(roi[core.astype(bool)], axis=0)
+        near = cv2.dilate(comp, np.ones((7, 7), np.uint8))
+        far = cv2.dilate(comp, np.ones((13, 13), np.uint8))
+        ring = far.astype(bool) & ~near.astype(bool)
+        if ring.sum() >= 8:
+            background_rgb = np.median(roi[ring], axis=0)
+        else:
+            background_rgb = np.zeros(3)
+        contrast = marker_rgb - background_rgb
+        norm2 = float(contrast @ contrast)
+        support = near.astype(bool)
+        if norm2 < 100.0:
+            # Too little contrast to unmix: fall back to the binary flag (the paper's I(x, y)).
+            weight = comp.astype(np.float64)
+        else:
+            # Linear unmixing: the fraction of each pixel that the marker covers,
+            # assuming the pixel is a blend of marker and local background colours.
+            alpha = ((roi - background_rgb) @ contrast) / norm2
+            weight = np.clip(alpha, 0.0, 1.0) * support
+        moments = weighted_moments(weight, (float(x0), float(y0)))
+        if moments is None:
+            return None
+        return _Blob(moments, (x0, y0, x1, y1), marker_rgb)
+
+    def accept(self, blob: _Blob, rgb: np.ndarray) -> None:
+        xy = np.array([blob.moments.x_px, blob.moments.y_px])
+        if self.last_xy is not None:
+            self.velocity = 0.5 * self.velocity + 0.5 * (xy - self.last_xy)
+        self.last_xy = xy
+        if self.expected_area is None:
+            self.expected_area = blob.moments.m00
+            x0, y0, x1, y1 = blob.bbox
+            roi = rgb[y0:y1, x0:x1]
+            sel = self.model.mask(roi) if self.model is not None else np.ones(roi.shape[:2], bool)
+            if sel.sum() >= 3:
+                self.model = ColourModel.learn(roi[sel])
+            self.extent_px = float(max(x1 - x0, y1 - y0)) / 2.0
+        else:
+            self.expected_area = 0.9 * self.expected_area + 0.1 * blob.moments.m00
+
+    def lose(self) -> None:
+        self.velocity = np.zeros(2)
+
+
+def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
+    """The two most prominent saturated blobs of distinct hue, right one first."""
+    hsv = hsv_of_rgb(rgb)
+    mask = ((hsv[..., 1] >= 100) & (hsv[..., 2] >= 60)).astype(np.uint8)
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    found: list[tuple[float, float, ColourModel]] = []
+    for i in np.argsort(-stats[1:, cv2.CC_STAT_AREA]) + 1:
+        if stats[i, cv2.CC_STAT_AREA] < 12:
+            break
+        model = ColourModel.learn(rgb[labels == i])
+        clash = [m for m in exclude + [f[2] for f in found] if abs(((m.hue - model.hue + 90) % 180) - 90) < 12]
+        if clash:
+            continue
+        found.append((float(cents[i, 0]), float(stats[i, cv2.CC_STAT_AREA]), model))
+        if len(found) == 2:
+            break
+    found.sort(key=lambda f: -f[0])
+    return [f[2] for f in found]
+
+
+def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | None) -> tuple[float | None, float | None, str | None]:
+    """Sub-frame time at which a lit LED switches off.
+
+    A frame whose exposure straddles the switch is partly lit: with exposure
+    window [t − e/2, t + e/2], its level f gives t0 = t − e/2 + f·e. When no
+    frame is partly lit, the switch fell between exposures: the midpoint.
+    """
+    ok = np.isfinite(level)
+    if ok.sum() < 3:
+        return None, None, "LED: too few frames to find its switch"
+    lit = level > 0.5
+    first_off = np.flatnonzero(ok & ~lit)
+    if not lit[ok][0]:
+        return None, None, "LED not lit in the first frame: no input start found"
+    if first_off.size == 0:
+        return None, None, "LED never switches off: no input start found"
+    k = int(first_off[0])
+    period = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
+    exposure = period if exposure_s is None else min(float(exposure_s), period)
+    candidates = [j for j in (k - 1, k) if 0 <= j < level.size and 0.03 < level[j] < 0.97]
+    if candidates and exposure > 0:
+        j = min(candidates, key=lambda j: abs(level[j] - 0.5))
+        t0 = time_s[j] - exposure / 2.0 + float(np.clip(level[j], 0.0, 1.0)) * exposure
+        return float(t0), float(0.05 * exposure + 1e-4 * period), None
+    t_prev, t_next = float(time_s[k - 1]), float(time_s[k])
+    gap = max((t_next - t_prev) - exposure, 0.0)
+    return 0.5 * (t_prev + t_next), float(gap / math.sqrt(12.0)), None
+
+
+def track_video(
+    path: str | Path,
+    settings: TrackerSettings | None = None,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> Track:
+    """Track both markers (and the LED) through one video.
+
+    Parameters
+    ----------
+    path : path-like
+        Any video PyAV decodes.
+    settings : TrackerSettings
+    progress : callable, optional
+        Called with the number of frames done, now and then.
+
+    Returns
+    -------
+    Track
+
+    Raises
+    ------
+    ServoscopeError
+        When the video cannot be read, or a marker colour matches nothing in
+        the first frame.
+    """
+    settings = settings or TrackerSettings()
+    path = Path(path)
+    info = probe_video(path)
+    lead_spec = parse_colour(settings.lead, what="lead marker colour")
+    trail_spec = parse_colour(settings.trail, what="trail marker colour")
+    led_spec = parse_colour(settings.led, what="LED colour") if settings.led else None
+    if led_spec == AUTO:
+        raise ServoscopeError("LED colour: \"auto\" is not supported for the LED; give its colour")
+    lead = _MarkerTracker("lead", lead_spec, settings.search_radius_px)
+    trail = _MarkerTracker("trail", trail_spec, settings.search_radius_px)
+    led_model = ColourModel.from_seed(led_spec) if led_spec is not None else None  # type: ignore[arg-type]
+
+    times: list[float] = []
+    lead_xy: list[tuple[float, float]] = []
+    trail_xy: list[tuple[float, float]] = []
+    lead_area: list[float] = []
+    trail_area: list[float] = []
+    reasons: list[str] = []
+    led_signal: list[float] = []
+    warnings: list[str] = []
+    snapshot = None
+    snapshot_index = 0
+    led_local: np.ndarray | None = None  # LED position in the marker frame (trail→lead axes)
+    led_radius = 0.0
+
+    for frame in iter_frames(path):
+        rgb = frame.rgb
+        if frame.index == 0:
+            if AUTO in (lead_spec, trail_spec):
+                exclude = [led_model] if led_model is not None else []
+                exclude += [m.model for m in (lead, trail) if m.model is not None]
+                models = _auto_models(rgb, exclude)
+                for tracker in (lead, trail):
+                    if tracker.model is None:
+                        if not models:
+                            raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
+                        tracker.model = models.pop(0)
+        found = {}
+        reason = ""
+        for tracker in (lead, trail):
+            blob, why = tracker.find(rgb)
+            if blob is None:
+                tracker.lose()
+                reason = reason or why
+                if frame.index == 0:
+                    raise ServoscopeError(
+                        f"{path}: the {tracker.name} marker's colour {_spec_text(tracker.seed)} matches nothing in the first frame"
+                    )
+            else:
+                tracker.accept(blob, rgb)
+                found[tracker.name] = blob
+        times.append(frame.time_s)
+        for name, xy_list, area_list in (("lead", lead_xy, lead_area), ("trail", trail_xy, trail_area)):
+            if name in found:
+                m = found[name].moments
+                xy_list.append((m.x_px, m.y_px))
+                area_list.append(m.m00)
+            else:
+                xy_list.append((math.nan, math.nan))
+                area_list.append(math.nan)
+        reasons.append(reason)
+        if snapshot is None and not reason:
+            snapshot, snapshot_index = rgb.copy(), frame.index
+
+        if led_model is not None:
+            if led_local is None and len(found) == 2:
+                led_local, led_radius = _locate_led(rgb, led_model, found["lead"].moments, found["trail"].moments)
+                if led_local is None:
+                    warnings.append("LED not found in the first frames: no input start (t0)")
+                    led_model = None
+            led_signal.append(
+                _led_brightness(rgb, led_local, led_radius, found.get("lead"), found.get("trail"))
+                if led_local is not None
+                else math.nan
+            )
+        if progress is not None and frame.index % 50 == 0:
+            progress(frame.index + 1)
+
+    n = len(times)
+    if progress is not None:
+        progress(n)
+    if info.frame_count and n < info.frame_count:
+        warnings.append(f"decoded {n} of {info.frame_count} announced frames: the file ends early")
+    time_s = np.asarray(times)
+    lead_arr = np.asarray(lead_xy, dtype=np.float64).reshape(-1, 2)
+    trail_arr = np.asarray(trail_xy, dtype=np.float64).reshape(-1, 2)
+    valid = np.array([r == "" for r in reasons], dtype=bool)
+    if settings.camera is not None:
+        for arr, name in ((lead_arr, "lead"), (trail_arr, "trail")):
+            good = np.isfinite(arr[:, 0])
+            if good.any():
+                und, converged = settings.camera.undistort_points(arr[good])
+                arr[good] = und
+                bad = np.flatnonzero(good)[~converged]
+                for i in bad:
+                    valid[i] = False
+                    reasons[i] = reasons[i] or f"{name} centroid outside the calibrated region"
+    angle = angle_rad_from_centroids(lead_arr, trail_arr)
+    angle[~valid] = np.nan
+    if valid.any():
+        angle[valid] = np.unwrap(angle[valid])
+    if n and not valid.any():
+        warnings.append("no frame has both markers")
+    elif valid.sum() < n:
+        warnings.append(f"{n - int(valid.sum())} of {n} frames invalid (a marker not found)")
+
+    led_level = np.full(n, np.nan)
+    t0 = t0_unc = None
+    if led_signal and np.isfinite(led_signal).sum() >= 3:
+        signal = np.asarray(led_signal, dtype=np.float64)
+        good = np.flatnonzero(np.isfinite(signal))
+        head = signal[good[: min(5, good.size)]]
+        tail = signal[good[-min(5, good.size):]]
+        on, off = float(np.median(head)), float(np.median(tail))
+        if on - off > 10.0:
+            led_level = (signal - off) / (on - off)
+            t0, t0_unc, why = _led_switch_time(time_s, led_level, settings.exposure_s)
+            if why:
+                warnings.append(why)
+        else:
+            warnings.append("LED brightness does not change: no input start (t0) found")
+
+    return Track(
+        video=path.name,
+        frame=np.arange(n),
+        time_s=time_s,
+        lead_xy_px=lead_arr,
+        trail_xy_px=trail_arr,
+        lead_area_px=np.asarray(lead_area, dtype=np.float64),
+        trail_area_px=np.asarray(trail_area, dtype=np.float64),
+        angle_rad=angle,
+        valid=valid,
+        reason=reasons,
+        led_level=led_level,
+        t0_s=t0,
+        t0_uncertainty_s=t0_unc,
+        warnings=warnings,
+        snapshot_rgb=snapshot,
+        snapshot_index=snapshot_index,
+    )
+
+
+def _spec_text(spec) -> str:
+    if isinstance(spec, str):
+        return spec
+    return "#%02x%02x%02x" % tuple(int(round(c)) for c in spec)
+
+
+def _marker_axes(lead: Moments, trail: Moments) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    origin = np.array([trail.x_px, trail.y_px])
+    axis = np.array([lead.x_px, lead.y_px]) - origin
+    length = float(np.hypot(*axis))
+    e = axis / length
+    nrm = np.array([-e[1], e[0]])
+    return origin, e, nrm, length
+
+
+def _locate_led(rgb, model: ColourModel, lead: Moments, trail: Moments):
+    mask = model.mask(rgb).astype(np.uint8)
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return None, 0.0
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < 3:
+        return None, 0.0
+    origin, e, nrm, length = _marker_axes(lead, trail)
+    d = cents[best] - origin
+    local = np.array([d @ e, d @ nrm]) / length
+    radius = math.sqrt(stats[best, cv2.CC_STAT_AREA] / math.pi)
+    return local, radius
+
+
+def _led_brightness(rgb, local, radius, lead: _Blob | None, trail: _Blob | None) -> float:
+    """Mean brightness (HSV value) in a disk that follows the LED on the blade."""
+    if lead is None or trail is None:
+        return math.nan
+    origin, e, nrm, length = _marker_axes(lead.moments, trail.moments)
+    centre = origin + length * (local[0] * e + local[1] * nrm)
+    r = 1.5 * radius + 1.0
+    h, w = rgb.shape[:2]
+    x0, x1 = int(max(0, centre[0] - r)), int(min(w, centre[0] + r + 1))
+    y0, y1 = int(max(0, centre[1] - r)), int(min(h, centre[1] + r + 1))
+    if x1 <= x0 or y1 <= y0:
+        return math.nan
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    disk = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= r * r
+    roi = rgb[y0:y1, x0:x1]
+    return float(roi[disk].max(axis=1).mean())

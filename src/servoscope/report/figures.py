@@ -1,0 +1,167 @@
+"""Figures of the report, one function each, from plain arrays.
+
+Each function builds and returns a matplotlib Figure (drawing nothing on
+screen), so that the same figure goes into the HTML report, a PNG file, or a
+notebook. Figure numbers in the titles refer to the paper.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")  # no display: figures are files and embedded images
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+__all__ = ["bode_figure", "dwell_figure", "step_figure", "overlay_figure"]
+
+
+def bode_figure(
+    frequency_hz: np.ndarray,
+    gain: np.ndarray,
+    gain_stderr: np.ndarray | None,
+    phase_deg: np.ndarray | None,
+    model_frequency_hz: np.ndarray,
+    model_gain: np.ndarray,
+    model_phase_deg: np.ndarray | None = None,
+    *,
+    bandwidth_rad_s: float | None = None,
+    truth_gain: np.ndarray | None = None,
+    label: str = "fitted model",
+) -> Figure:
+    """Amplitude plot (paper Fig. 9) and, when phases are known, the phase plot.
+
+    Parameters
+    ----------
+    frequency_hz, gain : ndarray, shape (n,)
+        Measured points; gain in output units per input unit.
+    gain_stderr : ndarray or None
+        Standard errors of the gains, drawn as error bars.
+    phase_deg : ndarray or None
+        Measured phases (NaN where unknown); the phase panel is drawn when any is finite.
+    model_frequency_hz, model_gain, model_phase_deg : ndarray
+        The fitted model on a dense grid.
+    """
+    with_phase = phase_deg is not None and np.isfinite(phase_deg).any()
+    fig, axes = plt.subplots(2 if with_phase else 1, 1, figsize=(7.5, 6.2 if with_phase else 4.2), sharex=True, squeeze=False)
+    ax = axes[0, 0]
+    omega = 2 * np.pi * np.asarray(frequency_hz)
+    gain_db = 20 * np.log10(np.asarray(gain))
+    yerr = None
+    if gain_stderr is not None:
+        yerr = 20 / np.log(10) * np.asarray(gain_stderr) / np.asarray(gain)
+    ax.errorbar(omega, gain_db, yerr=yerr, fmt="o", ms=5, color="C0", capsize=3, label="measured")
+    ax.semilogx(2 * np.pi * np.asarray(model_frequency_hz), 20 * np.log10(np.asarray(model_gain)), "-", color="C1", label=label)
+    if truth_gain is not None:
+        ax.semilogx(2 * np.pi * np.asarray(model_frequency_hz), 20 * np.log10(np.asarray(truth_gain)), "--", color="0.5", lw=1, label="truth")
+    if bandwidth_rad_s is not None and np.isfinite(bandwidth_rad_s):
+        ax.axvline(bandwidth_rad_s, color="C2", ls=":", lw=1.2, label=f"−3 dB bandwidth {bandwidth_rad_s:.1f} rad/s")
+    ax.set_xscale("log")
+    ax.set_ylabel("gain (dB)")
+    ax.set_title("Frequency response: amplitude (paper Fig. 9)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="lower left", fontsize=8)
+    if with_phase:
+        axp = axes[1, 0]
+        axp.plot(omega, phase_deg, "o", ms=5, color="C0", label="measured")
+        if model_phase_deg is not None:
+            axp.plot(2 * np.pi * np.asarray(model_frequency_hz), model_phase_deg, "-", color="C1", label=label)
+        axp.set_ylabel("phase (deg)")
+        axp.grid(True, which="both", alpha=0.3)
+        axp.legend(loc="lower left", fontsize=8)
+    axes[-1, 0].set_xlabel("angular frequency ω (rad/s)")
+    fig.tight_layout()
+    return fig
+
+
+def dwell_figure(
+    time_s: np.ndarray,
+    angle_rad: np.ndarray,
+    valid: np.ndarray,
+    fit_angle_rad: np.ndarray,
+    window_s: tuple[float, float],
+    *,
+    t0_s: float | None = None,
+    title: str = "",
+) -> Figure:
+    """One dwell: measured angle with the fitted sine (paper Fig. 7) and the residual (Fig. 8)."""
+    time_s = np.asarray(time_s)
+    valid = np.asarray(valid, bool)
+    fig, (ax, axr) = plt.subplots(2, 1, figsize=(7.5, 5.4), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    ax.plot(time_s[valid], angle_rad[valid], ".", ms=3, color="C0", label="measured")
+    inwin = valid & (time_s >= window_s[0]) & (time_s <= window_s[1])
+    ax.plot(time_s[inwin], fit_angle_rad[inwin], "-", color="C1", lw=1.2, label="fitted sine")
+    for a in (ax, axr):
+        a.axvspan(window_s[0], window_s[1], color="C2", alpha=0.06)
+        if t0_s is not None:
+            a.axvline(t0_s, color="k", ls=":", lw=1)
+        a.grid(True, alpha=0.3)
+    ax.set_ylabel("angle (rad)")
+    ax.set_title(title or "Dwell: measured angle and fitted sine (paper Fig. 7)")
+    ax.legend(loc="upper right", fontsize=8)
+    axr.plot(time_s[inwin], angle_rad[inwin] - fit_angle_rad[inwin], "-", color="C3", lw=0.8)
+    axr.set_ylabel("residual (rad)")
+    axr.set_xlabel("time (s)")
+    axr.set_title("Residual (paper Fig. 8)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def step_figure(
+    time_s: np.ndarray,
+    angle_rad: np.ndarray,
+    valid: np.ndarray,
+    predicted_angle_rad: np.ndarray | None,
+    *,
+    t0_s: float | None = None,
+    dead_time_s: float | None = None,
+) -> Figure:
+    """Step response: measured and predicted by the identified model (paper Fig. 10)."""
+    time_s = np.asarray(time_s)
+    valid = np.asarray(valid, bool)
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    ax.plot(time_s[valid], angle_rad[valid], ".", ms=3, color="C0", label="measured")
+    if predicted_angle_rad is not None:
+        ax.plot(time_s, predicted_angle_rad, "-", color="C1", lw=1.4, label="predicted (identified model)")
+    if t0_s is not None:
+        ax.axvline(t0_s, color="k", ls=":", lw=1, label="input start (LED off)")
+        if dead_time_s is not None:
+            ax.axvline(t0_s + dead_time_s, color="C2", ls="--", lw=1, label=f"dead time {1e3 * dead_time_s:.1f} ms")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("angle (rad)")
+    ax.set_title("Step response: measured and predicted (paper Fig. 10)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def overlay_figure(
+    frame_rgb: np.ndarray,
+    lead_xy_px: Sequence[float],
+    trail_xy_px: Sequence[float],
+    angle_rad: float,
+    *,
+    title: str = "",
+) -> Figure:
+    """A frame with the detected centroids and the joining line (paper Fig. 4).
+
+    Centroids are in the recorded image's pixel coordinates.
+    """
+    h, w = frame_rgb.shape[:2]
+    fig, ax = plt.subplots(figsize=(7.5, 7.5 * h / w + 0.4))
+    ax.imshow(frame_rgb, interpolation="nearest")
+    lx, ly = lead_xy_px
+    tx, ty = trail_xy_px
+    ax.plot([tx, lx], [ty, ly], "-", color="white", lw=1.2)
+    ax.plot([tx, lx], [ty, ty], "--", color="white", lw=0.8, alpha=0.7)
+    for (x, y), name in (((lx, ly), "lead"), ((tx, ty), "trail")):
+        ax.plot([x], [y], "s", ms=7, mfc="none", mec="white", mew=1.5)
+        ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", color="white", fontsize=9)
+    ax.set_title(title or f"Detected centroids, θ = {np.degrees(angle_rad):.3f}° (paper Fig. 4)")
+    ax.set_axis_off()
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,91 @@
+"""The self-contained HTML report: every figure embedded, no network needed."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from dataclasses import dataclass, field
+
+from matplotlib.figure import Figure
+
+__all__ = ["ReportSection", "figure_png_base64", "render_html"]
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem auto;max-width:1000px;color:#222;line-height:1.45}
+h1{font-size:1.6rem;margin-bottom:.2rem} h2{font-size:1.2rem;margin-top:2rem;border-bottom:1px solid #ddd;padding-bottom:.2rem}
+table{border-collapse:collapse;margin:.6rem 0;font-size:.9rem} td,th{border:1px solid #ddd;padding:.25rem .6rem;text-align:right}
+th{background:#f4f4f4} td:first-child,th:first-child{text-align:left}
+.warn{background:#fff4e5;border-left:4px solid #f0a020;padding:.4rem .8rem;margin:.3rem 0}
+.ok{color:#1a7f37} .bad{color:#b42318} figure{margin:1rem 0} img{max-width:100%;height:auto}
+figcaption{font-size:.85rem;color:#555} .muted{color:#666;font-size:.85rem}
+"""
+
+
+@dataclass
+class ReportSection:
+    """A titled part of the report: text, tables and figures in order."""
+
+    title: str
+    html_parts: list[str] = field(default_factory=list)
+
+    def text(self, text: str) -> "ReportSection":
+        self.html_parts.append(f"<p>{html.escape(text)}</p>")
+        return self
+
+    def table(self, header: list[str], rows: list[list[object]]) -> "ReportSection":
+        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
+        self.html_parts.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+        return self
+
+    def figure(self, fig: Figure, caption: str, alt: str) -> "ReportSection":
+        data = figure_png_base64(fig)
+        self.html_parts.append(
+            f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
+        return self
+
+    def warnings(self, items: list[str]) -> "ReportSection":
+        for item in items:
+            self.html_parts.append(f'<div class="warn">{html.escape(item)}</div>')
+        return self
+
+
+def _fmt(value: object) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        if value != value:  # NaN
+            return "—"
+        return f"{value:.6g}"
+    return str(value)
+
+
+def figure_png_base64(fig: Figure, dpi: int = 110) -> str:
+    """PNG bytes of a figure, base64-encoded for a data: URL; closes the figure."""
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    plt.close(fig)
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def render_html(title: str, subtitle: str, sections: list[ReportSection]) -> str:
+    """The whole page as one string."""
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1><p class=\"muted\">{html.escape(subtitle)}</p>",
+    ]
+    for section in sections:
+        parts.append(f"<section><h2>{html.escape(section.title)}</h2>")
+        parts.extend(section.html_parts)
+        parts.append("</section>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
+

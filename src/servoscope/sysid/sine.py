@@ -1,0 +1,483 @@
+"""Fit a sinusoid to one sine-dwell recording.
+
+The collective input of a sine dwell is ``u(t) = A_in * sin(2*pi*f*(t - t0))``
+for ``t >= t0`` (``t0`` is the instant the LED switches off). Once the
+transient has died out, a linear system responds with
+``y(t) = offset + amplitude * sin(2*pi*f*(t - t0) + phase_rad)``;
+:func:`fit_sine` estimates those quantities, with standard errors, from the
+steady-state part of the record.
+
+Method
+------
+The model ``offset + a*cos(w*(t - tc)) + b*sin(w*(t - tc))`` (``tc``: the mean
+time of the window, for good conditioning) is first fitted by linear least
+squares at the commanded frequency. With ``refine_frequency=True`` the
+frequency is then freed and ``(offset, a, b, f)`` are refined with
+:func:`scipy.optimize.least_squares`. Standard errors come from the Jacobian
+covariance scaled by the residual variance; the phase relative to ``t0`` is
+obtained from the phase at ``tc`` by the delta method, so its standard error
+includes the frequency uncertainty times the lever arm ``tc - t0``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from servoscope.errors import ServoscopeError
+
+__all__ = ["SineFit", "fit_sine"]
+
+_MIN_SAMPLES = 5
+_FEW_SAMPLES = 20
+_FEW_PERIODS = 2.0
+
+
+def _jsonable(value: Any) -> Any:
+    """Convert numpy scalars/arrays and NaN to plain, JSON-serializable Python."""
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [_jsonable(v) for v in value.tolist()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+def _readonly(a: ArrayLike) -> NDArray[np.float64]:
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
+def _import_pandas() -> Any:
+    try:
+        import pandas as pd
+    except ImportError as exc:  # pragma: no cover - depends on environment
+        raise ImportError(
+            "to_pandas() needs pandas, which is not a servoscope dependency; "
+            "install it with `pip install pandas`"
+        ) from exc
+    return pd
+
+
+def _wrap_pi(angle_rad: float) -> float:
+    """Wrap an angle to (-pi, pi]."""
+    w = math.remainder(angle_rad, 2.0 * math.pi)
+    return math.pi if w == -math.pi else w
+
+
+@dataclass(frozen=True)
+class SineFit:
+    """Result of :func:`fit_sine` for one sine dwell.
+
+    The fitted output is
+    ``offset + amplitude * sin(2*pi*frequency_hz*(t - t0_s) + phase_rad)``.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Fitted (refined) frequency in Hz; the commanded one when
+        ``refine_frequency=False``.
+    frequency_stderr_hz : float or None
+        Standard error of `frequency_hz` in Hz (None when not refined).
+    commanded_frequency_hz : float
+        The frequency passed to :func:`fit_sine`, in Hz.
+    amplitude : float
+        Output amplitude (>= 0), in output units (e.g. rad).
+    amplitude_stderr : float
+        Standard error of `amplitude`, output units.
+    phase_rad : float or None
+        Phase of the output relative to the input sine
+        ``sin(2*pi*f*(t - t0))``, in rad, wrapped to (-pi, pi]; None when
+        ``t0_s`` is unknown. A lagging system has a negative phase.
+    phase_stderr_rad : float or None
+        Standard error of `phase_rad`, in rad.
+    offset : float
+        Constant term of the fit, output units.
+    offset_stderr : float
+        Standard error of `offset`.
+    residual_rms : float
+        Root-mean-square residual, output units.
+    fidelity : float
+        Sinusoidal fidelity: power of the fitted fundamental divided by the
+        total AC power of the window, ``1 - sum(residual**2) /
+        sum((y - mean(y))**2)``; 1.0 for a pure sine. Low values expose
+        nonlinearity or noise.
+    n_samples : int
+        Number of samples in the steady-state window.
+    window_s : tuple of float
+        (first, last) sample time of the window, in s.
+    t0_s : float or None
+        Input start time used as phase reference, in s.
+    reference_time_s : float
+        Time origin ``tr`` of the cos/sin terms (``t0_s`` if known, else the
+        first time of the window), in s.
+    warnings : tuple of str
+        Non-fatal problems (short window, few samples, energy not at the
+        commanded frequency, ...).
+    time_s, y, residual : numpy.ndarray
+        The window's sample times (s), samples and residuals ``y - model``.
+    covariance : numpy.ndarray
+        Covariance of the internal parameters ``(offset, a, b[, f])`` with
+        the cos/sin terms referenced to the window's mean time.
+    """
+
+    frequency_hz: float
+    frequency_stderr_hz: float | None
+    commanded_frequency_hz: float
+    amplitude: float
+    amplitude_stderr: float
+    phase_rad: float | None
+    phase_stderr_rad: float | None
+    offset: float
+    offset_stderr: float
+    residual_rms: float
+    fidelity: float
+    n_samples: int
+    window_s: tuple[float, float]
+    t0_s: float | None
+    reference_time_s: float
+    warnings: tuple[str, ...]
+    time_s: NDArray[np.float64] = field(repr=False, compare=False)
+    y: NDArray[np.float64] = field(repr=False, compare=False)
+    residual: NDArray[np.float64] = field(repr=False, compare=False)
+    covariance: NDArray[np.float64] = field(repr=False, compare=False)
+    _center_s: float = field(repr=False, compare=False, default=0.0)
+    _cos_coef: float = field(repr=False, compare=False, default=0.0)
+    _sin_coef: float = field(repr=False, compare=False, default=0.0)
+
+    @property
+    def omega_rad_s(self) -> float:
+        """Fitted angular frequency in rad/s."""
+        return 2.0 * math.pi * self.frequency_hz
+
+    @property
+    def phase_deg(self) -> float | None:
+        """`phase_rad` in degrees (None when unknown)."""
+        return None if self.phase_rad is None else math.degrees(self.phase_rad)
+
+    def model(self, time_s: ArrayLike) -> NDArray[np.float64]:
+        """Evaluate the fitted sinusoid.
+
+        Parameters
+        ----------
+        time_s : array_like
+            Times in s (same clock as the fitted data).
+
+        Returns
+        -------
+        numpy.ndarray
+            Fitted output, output units.
+        """
+        t = np.asarray(time_s, dtype=float)
+        theta = 2.0 * math.pi * self.frequency_hz * (t - self._center_s)
+        return self.offset + self._cos_coef * np.cos(theta) + self._sin_coef * np.sin(theta)
+
+    def summary(self) -> dict[str, Any]:
+        """Scalar results as a JSON-serializable dict (NaN -> None)."""
+        return _jsonable(
+            {
+                "frequency_hz": self.frequency_hz,
+                "frequency_stderr_hz": self.frequency_stderr_hz,
+                "commanded_frequency_hz": self.commanded_frequency_hz,
+                "amplitude": self.amplitude,
+                "amplitude_stderr": self.amplitude_stderr,
+                "phase_rad": self.phase_rad,
+                "phase_stderr_rad": self.phase_stderr_rad,
+                "offset": self.offset,
+                "offset_stderr": self.offset_stderr,
+                "residual_rms": self.residual_rms,
+                "fidelity": self.fidelity,
+                "n_samples": self.n_samples,
+                "window_s": list(self.window_s),
+                "t0_s": self.t0_s,
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def to_pandas(self) -> Any:
+        """Window samples, fitted values and residuals as a pandas DataFrame.
+
+        Columns: ``time_s``, ``y``, ``fitted``, ``residual``. Requires pandas.
+        """
+        pd = _import_pandas()
+        return pd.DataFrame(
+            {
+                "time_s": np.asarray(self.time_s),
+                "y": np.asarray(self.y),
+                "fitted": self.model(self.time_s),
+                "residual": np.asarray(self.residual),
+            }
+        )
+
+    def _repr_html_(self) -> str:
+        rows = "".join(
+            f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in self.summary().items()
+        )
+        return f"<table><caption>SineFit</caption>{rows}</table>"
+
+
+def _design(t: NDArray[np.float64], freq_hz: float, tc: float) -> NDArray[np.float64]:
+    theta = 2.0 * math.pi * freq_hz * (t - tc)
+    return np.column_stack([np.ones_like(t), np.cos(theta), np.sin(theta)])
+
+
+def _fit_power(t: NDArray[np.float64], y: NDArray[np.float64], freqs: NDArray[np.float64], tc: float) -> NDArray[np.float64]:
+    """Floating-mean periodogram: AC power explained by a sine at each frequency.
+
+    For each frequency, the sum of squares explained by the least-squares fit
+    of ``offset + a*cos + b*sin`` beyond the mean (same units as ``y**2``).
+    """
+    yc = y - y.mean()
+    th = 2.0 * math.pi * np.outer(freqs, t - tc)
+    c = np.cos(th)
+    s = np.sin(th)
+    c -= c.mean(axis=1, keepdims=True)
+    s -= s.mean(axis=1, keepdims=True)
+    cc = np.einsum("ij,ij->i", c, c)
+    ss = np.einsum("ij,ij->i", s, s)
+    cs = np.einsum("ij,ij->i", c, s)
+    cy = c @ yc
+    sy = s @ yc
+    det = cc * ss - cs * cs
+    ok = det > 1e-12 * np.maximum(cc * ss, 1e-300)
+    out = np.zeros(freqs.size)
+    # explained SS = v^T M^{-1} v with M = [[cc, cs], [cs, ss]], v = [cy, sy]
+    out[ok] = (ss[ok] * cy[ok] ** 2 - 2 * cs[ok] * cy[ok] * sy[ok] + cc[ok] * sy[ok] ** 2) / det[ok]
+    return out
+
+
+def fit_sine(
+    time_s: ArrayLike,
+    y: ArrayLike,
+    frequency_hz: float,
+    *,
+    t0_s: float | None = None,
+    settle_s: float = 0.5,
+    valid: ArrayLike | None = None,
+    refine_frequency: bool = True,
+) -> SineFit:
+    """Fit ``offset + amplitude*sin(2*pi*f*(t - t0) + phase)`` to a sine dwell.
+
+    Parameters
+    ----------
+    time_s : array_like, shape (n,)
+        Sample (frame) times in s.
+    y : array_like, shape (n,)
+        Measured output (e.g. blade pitch angle in rad). NaNs are excluded.
+    frequency_hz : float
+        Commanded input frequency in Hz (> 0).
+    t0_s : float, optional
+        Input start time in s (LED off). Needed for the phase.
+    settle_s : float, default 0.5
+        Time in s skipped after ``t0_s`` (or after the first sample when
+        ``t0_s`` is None) to let the transient die out.
+    valid : array_like of bool, shape (n,), optional
+        False marks frames to exclude.
+    refine_frequency : bool, default True
+        Also fit the frequency (nonlinear least squares) instead of fixing it
+        at the commanded value.
+
+    Returns
+    -------
+    SineFit
+
+    Raises
+    ------
+    ServoscopeError
+        Inputs of mismatched shapes, a non-positive frequency, or fewer than
+        5 usable samples in the window.
+    """
+    t_all = np.asarray(time_s, dtype=float).ravel()
+    y_all = np.asarray(y, dtype=float).ravel()
+    if t_all.shape != y_all.shape:
+        raise ServoscopeError(
+            f"fit_sine: time_s has {t_all.size} samples but y has {y_all.size}"
+        )
+    f_cmd = float(frequency_hz)
+    if not (math.isfinite(f_cmd) and f_cmd > 0):
+        raise ServoscopeError(f"fit_sine: frequency_hz must be positive, got {frequency_hz!r}")
+    if not (math.isfinite(settle_s) and settle_s >= 0):
+        raise ServoscopeError(f"fit_sine: settle_s must be >= 0, got {settle_s!r}")
+    if t0_s is not None and not math.isfinite(float(t0_s)):
+        raise ServoscopeError(f"fit_sine: t0_s must be finite, got {t0_s!r}")
+    mask = np.isfinite(t_all) & np.isfinite(y_all)
+    if valid is not None:
+        v = np.asarray(valid, dtype=bool).ravel()
+        if v.shape != t_all.shape:
+            raise ServoscopeError(
+                f"fit_sine: valid has {v.size} entries but time_s has {t_all.size}"
+            )
+        mask &= v
+    if not np.any(np.isfinite(t_all)):
+        raise ServoscopeError("fit_sine: no finite sample times")
+    start = (float(t0_s) if t0_s is not None else float(np.nanmin(t_all))) + float(settle_s)
+    mask &= t_all >= start
+    order = np.argsort(t_all[mask], kind="stable")
+    t = t_all[mask][order]
+    yw = y_all[mask][order]
+    n = t.size
+    if n < _MIN_SAMPLES:
+        raise ServoscopeError(
+            f"fit_sine: only {n} usable samples after t = {start:.4g} s "
+            f"(need at least {_MIN_SAMPLES}); record longer or reduce settle_s"
+        )
+
+    warnings: list[str] = []
+    span = float(t[-1] - t[0])
+    n_periods = span * f_cmd
+    if n < _FEW_SAMPLES:
+        warnings.append(f"only {n} samples in the steady-state window (< {_FEW_SAMPLES})")
+    if n_periods < _FEW_PERIODS:
+        warnings.append(
+            f"steady-state window covers only {n_periods:.2f} periods (< {_FEW_PERIODS:g})"
+        )
+    dt_med = float(np.median(np.diff(t))) if n > 1 else float("nan")
+    if dt_med > 0 and f_cmd >= 0.5 / dt_med:
+        warnings.append(
+            f"commanded frequency {f_cmd:g} Hz is at or above the Nyquist frequency "
+            f"{0.5 / dt_med:g} Hz of the samples"
+        )
+
+    tc = float(np.mean(t))
+    yc = yw - yw.mean()
+    sst = float(yc @ yc)
+
+    # Linear fit at the commanded frequency.
+    X = _design(t, f_cmd, tc)
+    coef, *_ = np.linalg.lstsq(X, yw, rcond=None)
+    params = np.array([coef[0], coef[1], coef[2], f_cmd])
+
+    # Periodogram check: is the energy where the commanded frequency says?
+    if span > 0 and dt_med > 0 and sst > 0:
+        res_f = 1.0 / span
+        lo = max(f_cmd / 3.0, 0.5 * res_f)
+        hi = min(3.0 * f_cmd, 0.5 / dt_med)
+        if hi > lo:
+            n_grid = int(min(2000, max(50, math.ceil((hi - lo) / (0.1 * res_f)))))
+            grid = np.linspace(lo, hi, n_grid)
+            power = _fit_power(t, yw, grid, tc)
+            k = int(np.argmax(power))
+            p_cmd = float(_fit_power(t, yw, np.array([f_cmd]), tc)[0])
+            if abs(grid[k] - f_cmd) > 1.5 * res_f and power[k] > 2.0 * max(p_cmd, 0.0):
+                warnings.append(
+                    f"periodogram peak at {grid[k]:.4g} Hz, not at the commanded "
+                    f"{f_cmd:.4g} Hz (power there is {p_cmd / power[k]:.2g} of the peak)"
+                )
+
+    p_names = 3
+    if refine_frequency:
+        two_pi = 2.0 * math.pi
+        dtc = t - tc
+
+        def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            th = two_pi * p[3] * dtc
+            return p[0] + p[1] * np.cos(th) + p[2] * np.sin(th) - yw
+
+        def jac(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            th = two_pi * p[3] * dtc
+            c, s = np.cos(th), np.sin(th)
+            J = np.empty((n, 4))
+            J[:, 0] = 1.0
+            J[:, 1] = c
+            J[:, 2] = s
+            J[:, 3] = two_pi * dtc * (-p[1] * s + p[2] * c)
+            return J
+
+        if n > 4:
+            sol = least_squares(resid, params, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+            params = sol.x
+            p_names = 4
+            if params[3] <= 0 or (span > 0 and abs(params[3] - f_cmd) > 2.0 / span):
+                warnings.append(
+                    f"refined frequency {params[3]:.4g} Hz is far from the commanded "
+                    f"{f_cmd:.4g} Hz"
+                )
+        Jm = jac(params)[:, :p_names]
+    else:
+        Jm = _design(t, f_cmd, tc)
+
+    c0, a, b = float(params[0]), float(params[1]), float(params[2])
+    f_hat = float(params[3])
+    theta_hat = 2.0 * math.pi * f_hat * (t - tc)
+    model_vals = c0 + a * np.cos(theta_hat) + b * np.sin(theta_hat)
+    residual = yw - model_vals
+    ssr = float(residual @ residual)
+    dof = n - p_names
+    s2 = ssr / dof if dof > 0 else float("nan")
+    JtJ = Jm.T @ Jm
+    try:
+        cov = np.linalg.inv(JtJ) * s2
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(JtJ) * s2
+        warnings.append("singular Jacobian: standard errors are unreliable")
+
+    amp = math.hypot(a, b)
+    # Delta method for amplitude and phase at tc.
+    if amp > 0:
+        g_amp = np.zeros(p_names)
+        g_amp[1], g_amp[2] = a / amp, b / amp
+        amp_se = math.sqrt(max(float(g_amp @ cov @ g_amp), 0.0))
+    else:
+        amp_se = math.sqrt(max(float(cov[1, 1] + cov[2, 2]) / 2.0, 0.0))
+    offset_se = math.sqrt(max(float(cov[0, 0]), 0.0))
+    f_se: float | None = math.sqrt(max(float(cov[3, 3]), 0.0)) if p_names == 4 else None
+
+    phase: float | None = None
+    phase_se: float | None = None
+    if t0_s is not None:
+        # y = amp*sin(w(t - tc) + phi_c), phi_c = atan2(a, b);
+        # relative to t0: phi = phi_c + w*(t0 - tc).
+        phi_c = math.atan2(a, b)
+        lever = float(t0_s) - tc
+        phase = _wrap_pi(phi_c + 2.0 * math.pi * f_hat * lever)
+        g_ph = np.zeros(p_names)
+        if amp > 0:
+            g_ph[1], g_ph[2] = b / amp**2, -a / amp**2
+        if p_names == 4:
+            g_ph[3] = 2.0 * math.pi * lever
+        phase_se = math.sqrt(max(float(g_ph @ cov @ g_ph), 0.0)) if amp > 0 else float("nan")
+
+    fidelity = 1.0 - ssr / sst if sst > 0 else float("nan")
+    ref = float(t0_s) if t0_s is not None else float(t[0])
+
+    return SineFit(
+        frequency_hz=f_hat,
+        frequency_stderr_hz=f_se,
+        commanded_frequency_hz=f_cmd,
+        amplitude=amp,
+        amplitude_stderr=amp_se,
+        phase_rad=phase,
+        phase_stderr_rad=phase_se,
+        offset=c0,
+        offset_stderr=offset_se,
+        residual_rms=math.sqrt(ssr / n),
+        fidelity=fidelity,
+        n_samples=int(n),
+        window_s=(float(t[0]), float(t[-1])),
+        t0_s=None if t0_s is None else float(t0_s),
+        reference_time_s=ref,
+        warnings=tuple(warnings),
+        time_s=_readonly(t),
+        y=_readonly(yw),
+        residual=_readonly(residual),
+        covariance=_readonly(cov),
+        _center_s=tc,
+        _cos_coef=a,
+        _sin_coef=b,
+    )

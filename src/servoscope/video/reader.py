@@ -1,0 +1,178 @@
+"""Reading footage with PyAV, frame by frame, with each frame's own timestamp.
+
+Times come from each frame's presentation timestamp (PTS × time base), never
+from frame index × nominal rate: camcorders drop and duplicate frames, and
+variable-frame-rate phones have no nominal rate at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Iterator
+
+import av
+import numpy as np
+
+from ..errors import ServoscopeError
+
+__all__ = ["VideoInfo", "Frame", "probe_video", "iter_frames"]
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """What the container says about a video's first video stream.
+
+    Attributes
+    ----------
+    path : Path
+    width, height : int
+        Frame size in pixels.
+    codec : str
+        Decoder name, e.g. ``"h264"`` or ``"rawvideo"``.
+    pixel_format : str
+        e.g. ``"yuv420p"``.
+    frame_rate_hz : float or None
+        Nominal (average) rate, for information only.
+    frame_count : int or None
+        Frames the container announces (0 or None when unknown).
+    duration_s : float or None
+    """
+
+    path: Path
+    width: int
+    height: int
+    codec: str
+    pixel_format: str | None
+    frame_rate_hz: float | None
+    frame_count: int | None
+    duration_s: float | None
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One decoded frame.
+
+    Attributes
+    ----------
+    index : int
+        Position in decoding order, from 0.
+    time_s : float
+        Presentation time in seconds (PTS × time base).
+    rgb : ndarray, shape (height, width, 3), uint8
+    """
+
+    index: int
+    time_s: float
+    rgb: np.ndarray
+
+
+def _open(path: Path) -> av.container.InputContainer:
+    if not path.exists():
+        raise ServoscopeError(f"{path}: video not found")
+    if path.is_dir():
+        raise ServoscopeError(f"{path}: is a folder, not a video")
+    if path.stat().st_size == 0:
+        raise ServoscopeError(f"{path}: empty file, not a video")
+    try:
+        container = av.open(str(path), mode="r")
+    except (av.error.FFmpegError, UnicodeDecodeError, ValueError) as exc:
+        raise ServoscopeError(f"{path}: not a readable video ({_reason(exc)})") from None
+    if not container.streams.video:
+        container.close()
+        raise ServoscopeError(f"{path}: has no video stream")
+    return container
+
+
+def _reason(exc: Exception) -> str:
+    text = getattr(exc, "strerror", None) or str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def probe_video(path: str | Path) -> VideoInfo:
+    """Open a video and read its stream properties, decoding nothing.
+
+    Raises
+    ------
+    ServoscopeError
+        When the file is missing, empty, not a video, or has no video stream.
+    """
+    path = Path(path)
+    container = _open(path)
+    try:
+        stream = container.streams.video[0]
+        ctx = stream.codec_context
+        if ctx.width <= 0 or ctx.height <= 0:
+            raise ServoscopeError(f"{path}: video stream has no frame size")
+        rate = stream.average_rate or stream.guessed_rate
+        duration = None
+        if stream.duration is not None and stream.time_base is not None:
+            duration = float(stream.duration * stream.time_base)
+        elif container.duration is not None:
+            duration = container.duration / 1e6
+        return VideoInfo(
+            path=path,
+            width=int(ctx.width),
+            height=int(ctx.height),
+            codec=ctx.name,
+            pixel_format=ctx.format.name if ctx.format is not None else None,
+            frame_rate_hz=float(rate) if rate else None,
+            frame_count=int(stream.frames) if stream.frames else None,
+            duration_s=duration,
+        )
+    finally:
+        container.close()
+
+
+def iter_frames(path: str | Path, *, threads: int = 0) -> Iterator[Frame]:
+    """Decode a video's frames in order, as RGB arrays with their PTS times.
+
+    Parameters
+    ----------
+    path : path-like
+    threads : int
+        Decoder threads; 0 lets FFmpeg choose.
+
+    Yields
+    ------
+    Frame
+
+    Raises
+    ------
+    ServoscopeError
+        When the file cannot be opened, or it breaks before the first frame.
+        A video that breaks later ends early; the caller sees fewer frames.
+    """
+    path = Path(path)
+    container = _open(path)
+    try:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        if threads:
+            stream.codec_context.thread_count = threads
+        time_base = stream.time_base or Fraction(1, 1)
+        rate = stream.average_rate or stream.guessed_rate
+        index = 0
+        last_time = None
+        try:
+            for frame in container.decode(stream):
+                if frame.pts is not None:
+                    time_s = float(frame.pts * time_base)
+                elif last_time is not None and rate:
+                    # No PTS at all (some raw streams): the nominal rate is all there is.
+                    time_s = last_time + 1.0 / float(rate)
+                else:
+                    time_s = 0.0
+                last_time = time_s
+                yield Frame(index, time_s, frame.to_ndarray(format="rgb24"))
+                index += 1
+        except av.error.FFmpegError as exc:
+            if index == 0:
+                raise ServoscopeError(f"{path}: cannot decode any frame ({_reason(exc)})") from None
+            # A recording cut short: the frames before the break are good.
+            return
+        if index == 0:
+            raise ServoscopeError(f"{path}: contains no decodable frames")
+    finally:
+        container.close()

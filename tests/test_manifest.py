@@ -1,0 +1,95 @@
+"""campaign.toml validation: every mistake is one clear ServoscopeError."""
+
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+
+from servoscope.campaign.manifest import load_campaign
+from servoscope.errors import ServoscopeError
+
+
+def _tiny_video(path: Path, frames: int = 3) -> Path:
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream("mpeg4", rate=25)
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        for i in range(frames):
+            img = np.full((48, 64, 3), 40 * i, np.uint8)
+            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    return path
+
+
+GOOD = """
+[markers]
+lead = "#d62728"
+trail = "green"
+led = "#ffd400"
+[[tests]]
+video = "a.mp4"
+kind = "sine"
+frequency_hz = 1.0
+amplitude = 0.1
+[[tests]]
+video = "a.mp4"
+label = "stepper"
+kind = "step"
+amplitude = 0.5
+"""
+
+
+@pytest.fixture
+def folder(tmp_path):
+    _tiny_video(tmp_path / "a.mp4")
+    return tmp_path
+
+
+def _write(folder: Path, text: str) -> Path:
+    p = folder / "campaign.toml"
+    p.write_text(text)
+    return p
+
+
+def test_good_manifest(folder):
+    c = load_campaign(_write(folder, GOOD))
+    assert [t.kind for t in c.tests] == ["sine", "step"]
+    assert c.tests[0].video == (folder / "a.mp4").resolve()
+    assert c.tests[0].frequency_hz == 1.0 and c.tests[1].frequency_hz is None
+    assert c.tests[1].label == "stepper" and c.tests[0].label == "a"
+    assert c.camera is None and c.led == "#ffd400"
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("this is [not toml", "not valid TOML"),
+        (GOOD.replace('kind = "sine"', 'kind = "chirp"'), "unknown kind 'chirp'"),
+        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 0.0"), "frequency_hz must be > 0"),
+        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = -3"), "frequency_hz must be > 0"),
+        (GOOD.replace("frequency_hz = 1.0", 'frequency_hz = "fast"'), "must be a finite number"),
+        (GOOD.replace("frequency_hz = 1.0\n", ""), "needs frequency_hz"),
+        (GOOD.replace('video = "a.mp4"\nkind = "sine"', 'video = "missing.mp4"\nkind = "sine"'), "missing.mp4: video not found"),
+        (GOOD.replace('lead = "#d62728"', 'lead = "#zz0000"'), "is not a colour"),
+        (GOOD.replace('lead = "#d62728"\n', ""), "needs lead"),
+        (GOOD.replace("amplitude = 0.1", "amplitud = 0.1"), "did you mean 'amplitude'"),
+        ("[markers]\nlead='red'\ntrail='blue'\n", "no [[tests]]"),
+        (GOOD.replace('[markers]', '[camera]\ncalibration = "nope.json"\n[markers]'), "calibration file not found"),
+    ],
+)
+def test_bad_manifests(folder, text, expected):
+    with pytest.raises(ServoscopeError, match=expected.replace("[", r"\[").replace("(", r"\(")):
+        load_campaign(_write(folder, text))
+
+
+def test_not_a_video(folder):
+    (folder / "a.mp4").write_text("hello, I am text\n")
+    with pytest.raises(ServoscopeError, match="a.mp4: not a readable video"):
+        load_campaign(_write(folder, GOOD))
+
+
+def test_missing_manifest(tmp_path):
+    with pytest.raises(ServoscopeError, match="manifest not found"):
+        load_campaign(tmp_path / "nothing.toml")
