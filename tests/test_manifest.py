@@ -6,7 +6,7 @@ import av
 import numpy as np
 import pytest
 
-from servoscope.campaign.manifest import load_campaign
+from servoscope.campaign import load_campaign
 from servoscope.errors import ServoscopeError
 
 

@@ -468,9 +468,11 @@ def track_video(
         for arr, name in ((lead_arr, "lead"), (trail_arr, "trail")):
             good = np.isfinite(arr[:, 0])
             if good.any():
-                und, converged = settings.camera.undistort_points(arr[good])
+                raw = arr[good].copy()
+                und, _ = settings.camera.undistort_points(raw)
+                trusted = settings.camera.in_valid_region(raw)
                 arr[good] = und
-                bad = np.flatnonzero(good)[~converged]
+                bad = np.flatnonzero(good)[~trusted]
                 for i in bad:
                     valid[i] = False
                     reasons[i] = reasons[i] or f"{name} centroid outside the calibrated region"

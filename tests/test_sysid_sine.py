@@ -1,0 +1,209 @@
+"""Tests for servoscope.sysid.sine.fit_sine (oracles: numpy formulas, python-control)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+
+import control
+import numpy as np
+import pytest
+
+from servoscope.errors import ServoscopeError
+from servoscope.sysid.sine import SineFit, fit_sine
+
+FPS = 100.0
+T0 = 0.1234  # off the frame grid
+PAPER_G = control.tf([0.23 * 37.0**2], [1.0, 2 * 0.65 * 37.0, 37.0**2])
+
+
+def frames(duration_s: float = 3.0, offset_s: float = 0.0037) -> np.ndarray:
+    return np.arange(int(round(duration_s * FPS))) / FPS + offset_s
+
+
+def sine(t, amp, f, phase, offset=0.0, t0=T0):
+    return offset + amp * np.sin(2 * np.pi * f * (t - t0) + phase)
+
+
+def wrap(x):
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+def test_recovers_parameters_within_few_stderr():
+    t = frames()
+    rng = np.random.default_rng(42)
+    amp, f, ph, off = 0.05, 3.0, -0.7, 0.01
+    y = sine(t, amp, f, ph, off) + 1e-4 * rng.standard_normal(t.size)
+    r = fit_sine(t, y, 3.0, t0_s=T0)
+    assert isinstance(r, SineFit)
+    assert abs(r.amplitude - amp) < 4 * r.amplitude_stderr
+    assert abs(r.frequency_hz - f) < 4 * r.frequency_stderr_hz
+    assert abs(wrap(r.phase_rad - ph)) < 4 * r.phase_stderr_rad
+    assert abs(r.offset - off) < 4 * r.offset_stderr
+    # Stderrs are small but not absurdly small.
+    assert 1e-6 < r.amplitude_stderr < 1e-4
+    assert r.residual_rms == pytest.approx(1e-4, rel=0.2)
+    assert r.commanded_frequency_hz == 3.0
+    assert r.window_s[0] >= T0 + 0.5 and r.window_s[1] == pytest.approx(t[-1])
+    assert r.n_samples == np.count_nonzero(t >= T0 + 0.5)
+    assert r.warnings == ()
+
+
+def test_refined_frequency_when_commanded_is_slightly_off():
+    t = frames()
+    rng = np.random.default_rng(1)
+    y = sine(t, 0.04, 5.03, 0.3) + 1e-4 * rng.standard_normal(t.size)
+    r = fit_sine(t, y, 5.0, t0_s=T0)
+    assert abs(r.frequency_hz - 5.03) < 4 * r.frequency_stderr_hz
+    # Phase relative to t0 uses the refined frequency.
+    assert abs(wrap(r.phase_rad - 0.3)) < 4 * r.phase_stderr_rad
+    # Without refinement the frequency is the commanded one.
+    r2 = fit_sine(t, y, 5.0, t0_s=T0, refine_frequency=False)
+    assert r2.frequency_hz == 5.0 and r2.frequency_stderr_hz is None
+
+
+def test_stderr_is_honest_monte_carlo():
+    t = frames()
+    amp, f, ph = 0.05, 2.0, 0.9
+    clean = sine(t, amp, f, ph, 0.02)
+    est = {"a": [], "p": [], "f": []}
+    rep = {"a": [], "p": [], "f": []}
+    for seed in range(50):
+        rng = np.random.default_rng(1000 + seed)
+        r = fit_sine(t, clean + 1e-4 * rng.standard_normal(t.size), f, t0_s=T0)
+        est["a"].append(r.amplitude)
+        est["p"].append(r.phase_rad)
+        est["f"].append(r.frequency_hz)
+        rep["a"].append(r.amplitude_stderr)
+        rep["p"].append(r.phase_stderr_rad)
+        rep["f"].append(r.frequency_stderr_hz)
+    for k in est:
+        emp = np.std(est[k], ddof=1)
+        reported = np.mean(rep[k])
+        assert 0.7 < emp / reported < 1.3, (k, emp, reported)
+    # And unbiased at the level of the standard error of the mean.
+    assert abs(np.mean(est["a"]) - amp) < 4 * np.mean(rep["a"]) / math.sqrt(50)
+    assert abs(np.mean(est["p"]) - ph) < 4 * np.mean(rep["p"]) / math.sqrt(50)
+
+
+@pytest.mark.parametrize("f_hz", [1.0, 4.0, 9.0])
+def test_phase_matches_python_control_with_dead_time(f_hz):
+    """Output of G(s)e^{-s tau} driven by A sin(2 pi f (t - t0)), t >= t0."""
+    tau, a_in = 0.085, 0.1
+    dt = 1e-4
+    t_fine = np.arange(0.0, 3.2, dt)
+    t0 = 0.1234  # on the fine grid, off the 100 fps frame grid
+    u = np.where(t_fine >= t0, a_in * np.sin(2 * np.pi * f_hz * (t_fine - t0)), 0.0)
+    y_fine = np.asarray(control.forced_response(PAPER_G, T=t_fine, U=u).outputs).ravel()
+    t = frames(3.0)
+    y = np.interp(t - tau, t_fine, y_fine, left=0.0)
+    rng = np.random.default_rng(7)
+    y = y + 1e-4 * rng.standard_normal(t.size)
+    r = fit_sine(t, y, f_hz, t0_s=t0, settle_s=0.5)
+    w = 2 * np.pi * f_hz
+    g = complex(control.evalfr(PAPER_G, 1j * w)) * np.exp(-1j * w * tau)
+    assert abs(r.amplitude / a_in - abs(g)) < 5 * r.amplitude_stderr / a_in + 1e-5
+    assert abs(wrap(r.phase_rad - np.angle(g))) < 5 * r.phase_stderr_rad + 1e-4
+    assert r.fidelity > 0.99
+
+
+def test_no_t0_gives_no_phase_and_window_from_first_sample():
+    t = frames() + 10.0
+    y = sine(t, 0.05, 2.0, 0.4, t0=10.0)
+    r = fit_sine(t, y, 2.0, settle_s=0.2)
+    assert r.phase_rad is None and r.phase_stderr_rad is None and r.phase_deg is None
+    assert r.t0_s is None
+    assert r.window_s[0] >= t[0] + 0.2
+    assert r.reference_time_s == r.window_s[0]
+    assert r.amplitude == pytest.approx(0.05, rel=1e-9)
+    np.testing.assert_allclose(r.model(t), y, atol=1e-10)
+
+
+def test_noise_free_is_exact_and_model_matches():
+    t = frames()
+    y = sine(t, 0.03, 7.0, -2.5, -0.1)
+    r = fit_sine(t, y, 7.0, t0_s=T0)
+    assert r.amplitude == pytest.approx(0.03, rel=1e-9)
+    assert r.frequency_hz == pytest.approx(7.0, rel=1e-10)
+    assert wrap(r.phase_rad + 2.5) == pytest.approx(0.0, abs=1e-8)
+    assert r.fidelity == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(r.y - r.model(r.time_s), r.residual, atol=1e-15)
+
+
+def test_fidelity_with_third_harmonic():
+    # Whole number of periods: fundamental power / total AC power is exact.
+    t = np.arange(400) / FPS  # 4 s
+    a1, a3 = 0.05, 0.01
+    y = a1 * np.sin(2 * np.pi * 2.0 * t) + a3 * np.sin(2 * np.pi * 6.0 * t + 0.3)
+    r = fit_sine(t, y, 2.0, t0_s=0.0, settle_s=0.0, refine_frequency=False)
+    assert r.fidelity == pytest.approx(a1**2 / (a1**2 + a3**2), rel=1e-6)
+    assert r.amplitude == pytest.approx(a1, rel=1e-9)
+
+
+def test_valid_mask_and_nans_are_excluded():
+    t = frames()
+    rng = np.random.default_rng(3)
+    y = sine(t, 0.05, 3.0, 0.2) + 1e-4 * rng.standard_normal(t.size)
+    ref = fit_sine(t, y, 3.0, t0_s=T0)
+    bad = y.copy()
+    valid = np.ones(t.size, bool)
+    valid[100:110] = False
+    bad[100:110] = 5.0
+    bad[200] = np.nan
+    r = fit_sine(t, bad, 3.0, t0_s=T0, valid=valid)
+    assert r.n_samples == ref.n_samples - 11
+    assert abs(r.amplitude - ref.amplitude) < 3 * ref.amplitude_stderr
+
+
+def test_warnings_short_window_and_few_samples():
+    t = np.arange(12) / FPS + 0.6
+    y = sine(t, 0.05, 3.0, 0.2)
+    r = fit_sine(t, y, 3.0, t0_s=0.0, settle_s=0.5)
+    text = " ".join(r.warnings)
+    assert "periods" in text and "samples" in text
+
+
+def test_warning_when_energy_is_not_at_commanded_frequency():
+    t = frames()
+    y = sine(t, 0.05, 3.0, 0.2) + 1e-4 * np.random.default_rng(0).standard_normal(t.size)
+    r = fit_sine(t, y, 4.5, t0_s=T0)
+    assert any("periodogram" in w for w in r.warnings)
+    ok = fit_sine(t, y, 3.0, t0_s=T0)
+    assert not any("periodogram" in w for w in ok.warnings)
+
+
+def test_too_few_samples_raises():
+    t = np.arange(4) / FPS
+    with pytest.raises(ServoscopeError):
+        fit_sine(t, np.sin(t), 1.0, settle_s=0.0)
+    t = frames()
+    with pytest.raises(ServoscopeError):
+        fit_sine(t, np.sin(t), 1.0, t0_s=T0, settle_s=10.0)
+    with pytest.raises(ServoscopeError):
+        fit_sine(t, np.sin(t)[:-1], 1.0)
+    with pytest.raises(ServoscopeError):
+        fit_sine(t, np.sin(t), -1.0)
+    with pytest.raises(ServoscopeError):
+        fit_sine(t, np.sin(t), 1.0, valid=np.ones(3, bool))
+
+
+def test_summary_is_json_serializable():
+    t = frames()
+    r = fit_sine(t, sine(t, 0.05, 2.0, 0.1), 2.0)  # no t0: phase None
+    s = r.summary()
+    json.dumps(s, allow_nan=False)
+    assert s["phase_rad"] is None and s["amplitude"] == pytest.approx(0.05)
+    assert isinstance(s["n_samples"], int) and isinstance(s["warnings"], list)
+
+
+def test_to_pandas_or_clear_import_error():
+    t = frames()
+    r = fit_sine(t, sine(t, 0.05, 2.0, 0.1), 2.0, t0_s=T0)
+    if importlib.util.find_spec("pandas") is None:
+        with pytest.raises(ImportError, match="pandas"):
+            r.to_pandas()
+    else:
+        df = r.to_pandas()
+        assert list(df.columns) == ["time_s", "y", "fitted", "residual"]
+        assert len(df) == r.n_samples
