@@ -244,3 +244,15 @@ def test_bandwidth_resonant_uses_first_crossing_and_rejects_unstable():
         bandwidth_rad_s(control.tf([1.0], [1.0, -1.0]))
     with pytest.raises(ServoscopeError):
         bandwidth_rad_s(control.tf([1.0, 0.0], [1.0, 1.0]))  # zero DC gain
+
+
+def test_stderr_scaled_by_residual_variance():
+    # Misstated measurement errors (uniformly x3) change neither the estimates
+    # nor the standard errors: the covariance is scaled by the reduced chi^2.
+    rng = np.random.default_rng(9)
+    g = np.abs(true_response()) * (1 + 0.005 * rng.standard_normal(14))
+    a = fit_second_order(fr_from(g, 0.005 * g))
+    b = fit_second_order(fr_from(g, 0.015 * g))
+    assert b.natural_frequency_rad_s == pytest.approx(a.natural_frequency_rad_s, rel=1e-8)
+    assert b.damping_ratio_stderr == pytest.approx(a.damping_ratio_stderr, rel=1e-6)
+    assert b.gain_stderr == pytest.approx(a.gain_stderr, rel=1e-6)

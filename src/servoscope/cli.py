@@ -103,6 +103,45 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
 
 
 @cli.command()
+@click.argument("video", type=click.Path(path_type=Path))
+@click.option("--frame", "frame_index", default=0, show_default=True, type=int, help="Frame to look at (0-based).")
+@click.option("--out", "out_png", type=click.Path(dir_okay=False, path_type=Path), help="Picture with the candidates numbered (PNG).")
+def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
+    """List the coloured blobs in a frame of VIDEO, to choose the marker colours."""
+    import cv2
+    from rich.console import Console
+    from rich.table import Table
+
+    from .markers.candidates import draw_candidates, find_candidates
+    from .video import iter_frames
+
+    if frame_index < 0:
+        raise ServoscopeError(f"--frame must be ≥ 0, got {frame_index}")
+    chosen = None
+    for frame in iter_frames(video):
+        if frame.index == frame_index:
+            chosen = frame
+            break
+    if chosen is None:
+        raise ServoscopeError(f"{video}: has no frame {frame_index}")
+    found = find_candidates(chosen.rgb)
+    table = Table(title=f"{video.name}, frame {frame_index} (t = {chosen.time_s:.3f} s): coloured blobs")
+    for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)"):
+        table.add_column(name, justify="right")
+    for c in found:
+        table.add_row(str(c.number), c.colour_hex, f"{c.hue_deg:.0f}", f"{c.x_px:.1f}", f"{c.y_px:.1f}", str(c.area_px))
+    Console(highlight=False).print(table)
+    if not found:
+        click.echo("no saturated blob found", err=True)
+    if out_png is not None:
+        out_png.parent.mkdir(parents=True, exist_ok=True)
+        picture = draw_candidates(chosen.rgb, found)
+        if not cv2.imwrite(str(out_png), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR)):
+            raise ServoscopeError(f"{out_png}: cannot write the picture")
+        click.echo(f"wrote {out_png}")
+
+
+@cli.command()
 @click.argument("campaign", type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder for result.json, report.html, tracks/.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")

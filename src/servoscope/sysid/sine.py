@@ -357,6 +357,11 @@ def fit_sine(
     tc = float(np.mean(t))
     yc = yw - yw.mean()
     sst = float(yc @ yc)
+    scale = float(np.max(np.abs(yw)))
+    flat = sst == 0.0 or math.sqrt(sst / n) <= 1e-10 * scale
+    if flat:
+        sst = 0.0
+        warnings.append("no AC signal in the steady-state window (constant output)")
 
     # Linear fit at the commanded frequency.
     X = _design(t, f_cmd, tc)
@@ -381,7 +386,7 @@ def fit_sine(
                 )
 
     p_names = 3
-    if refine_frequency:
+    if refine_frequency and not flat:
         two_pi = 2.0 * math.pi
         dtc = t - tc
 

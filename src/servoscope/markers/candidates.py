@@ -1,0 +1,80 @@
+"""Candidate coloured blobs in a frame, so that a user can pick the markers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .colour import ColourModel, hsv_of_rgb
+
+__all__ = ["Candidate", "find_candidates", "draw_candidates"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A saturated blob.
+
+    Attributes
+    ----------
+    number : int
+        1-based, largest first.
+    colour_hex : str
+        Median colour of the blob, "#rrggbb".
+    x_px, y_px : float
+        Centroid (pixels).
+    area_px : int
+    hue_deg : float
+        0–360.
+    """
+
+    number: int
+    colour_hex: str
+    x_px: float
+    y_px: float
+    area_px: int
+    hue_deg: float
+
+
+def find_candidates(
+    rgb: np.ndarray, *, min_saturation: int = 90, min_value: int = 50, min_area_px: int = 12, limit: int = 20
+) -> list[Candidate]:
+    """Saturated connected blobs of one frame, largest first.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (h, w, 3), uint8
+    min_saturation, min_value : int
+        OpenCV HSV floors (0–255): grey, black and white are not markers.
+    min_area_px : int
+    limit : int
+        At most this many candidates.
+    """
+    hsv = hsv_of_rgb(rgb)
+    mask = ((hsv[..., 1] >= min_saturation) & (hsv[..., 2] >= min_value)).astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    order = np.argsort(-stats[1:, cv2.CC_STAT_AREA]) + 1
+    out: list[Candidate] = []
+    for i in order:
+        area = int(stats[i, cv2.CC_STAT_AREA])
+        if area < min_area_px or len(out) >= limit:
+            break
+        model = ColourModel.learn(rgb[labels == i])
+        r, g, b = (int(round(c)) for c in model.rgb)
+        out.append(
+            Candidate(len(out) + 1, f"#{r:02x}{g:02x}{b:02x}", float(cents[i, 0]), float(cents[i, 1]), area, 2.0 * model.hue)
+        )
+    return out
+
+
+def draw_candidates(rgb: np.ndarray, candidates: list[Candidate]) -> np.ndarray:
+    """A copy of the frame with each candidate circled and numbered (RGB uint8)."""
+    canvas = np.ascontiguousarray(rgb.copy())
+    for c in candidates:
+        radius = int(max(6, np.sqrt(c.area_px / np.pi) + 5))
+        centre = (int(round(c.x_px)), int(round(c.y_px)))
+        cv2.circle(canvas, centre, radius, (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.putText(canvas, str(c.number), (centre[0] + radius + 2, centre[1] - radius), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return canvas

@@ -1,0 +1,562 @@
+"""Sweep planning: which frequencies to dwell at, for how long, and what to warn about.
+
+A plan is a ``campaign.toml`` without ``video`` keys plus a ``[plan]`` table
+with what the rig needs (frame rate, servo update rate, dwell lengths,
+warnings). ``servoscope drive`` reads it, runs it, and writes the completed
+campaign with one video name per test.
+
+Warning rules (see ``docs/rig.md``):
+
+* camera: a frequency above half the frame rate aliases; below 5 frames per
+  period the sine fit has too few samples per cycle;
+* servo update (the command is a staircase held for ``1/update_hz``): at or
+  above ``update_hz/2`` the servo sees the folded alias, not the frequency;
+  above ``0.4·update_hz`` (fewer than 2.5 updates per period) the staircase's
+  first image at ``update_hz − f`` carries ≥ 2/3 of the sine's amplitude;
+* PWM ripple: the servo's own response to each PWM frame shakes the blade at
+  ``k·update_hz``; the camera sees that at the fold of ``k·update_hz`` by the
+  frame rate; a frequency within a dwell's resolution of that alias is
+  contaminated by it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ServoscopeError
+
+__all__ = [
+    "Dwell",
+    "SweepPlan",
+    "plan_sweep",
+    "dwell_duration_s",
+    "frequency_warnings",
+    "fold_hz",
+    "read_plan",
+    "write_plan",
+    "plan_to_toml",
+    "default_video_name",
+    "with_videos",
+    "MIN_FRAMES_PER_PERIOD",
+    "MIN_UPDATES_PER_PERIOD",
+    "PWM_HARMONICS",
+]
+
+#: Fewer camera frames per period than this draws a warning.
+MIN_FRAMES_PER_PERIOD = 5.0
+#: Fewer servo updates per period than this draws a warning (the staircase's
+#: first image at update_hz − f then has ≥ 2/3 of the fundamental's amplitude).
+MIN_UPDATES_PER_PERIOD = 2.5
+#: PWM-frame harmonics k·update_hz (k = 1…PWM_HARMONICS) checked for camera aliases.
+PWM_HARMONICS = 4
+
+_DEFAULT_MARKERS = {"lead": "#d62728", "trail": "#2ca02c", "led": "#ffd400"}
+_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label"}
+_PLAN_KEYS = {"fps", "update_hz", "settle_s", "periods", "min_seconds", "lead_in_s", "tail_s", "rest_s", "dwells", "drive"}
+_DWELL_KEYS = {"duration_s", "warnings", "max_late_ms"}
+
+
+@dataclass(frozen=True)
+class Dwell:
+    """One recording: a sine dwell or the step test.
+
+    Attributes
+    ----------
+    kind : str
+        ``"sine"`` or ``"step"``.
+    amplitude : float
+        Sine amplitude or step size, input units.
+    frequency_hz : float or None
+        Sine frequency, Hz; None for a step.
+    duration_s : float
+        Time the input is applied, from t0 until the command returns to
+        centre, s. For a sine a whole number of periods, so the command ends at 0.
+    warnings : tuple of str
+        Why this dwell may measure badly.
+    video : str or None
+        Video file name, once known.
+    label : str or None
+        Optional label (the manifest's ``label``).
+    max_late_ms : float or None
+        After driving: the latest any command was sent behind schedule, ms.
+    """
+
+    kind: str
+    amplitude: float
+    frequency_hz: float | None
+    duration_s: float
+    warnings: tuple[str, ...] = ()
+    video: str | None = None
+    label: str | None = None
+    max_late_ms: float | None = None
+
+    def input_at(self, t_s: float | np.ndarray) -> float | np.ndarray:
+        """The planned input u at time ``t_s`` after t0 (0 before t0 and after the dwell).
+
+        Parameters
+        ----------
+        t_s : float or array
+            Time since the input start t0, s.
+
+        Returns
+        -------
+        float or array
+            Input, input units: ``amplitude·sin(2πf·t)`` (sine) or
+            ``amplitude`` (step) for ``0 ≤ t < duration_s``.
+        """
+        t = np.asarray(t_s, dtype=float)
+        on = (t >= 0.0) & (t < self.duration_s)
+        if self.kind == "sine":
+            u = self.amplitude * np.sin(2.0 * np.pi * float(self.frequency_hz) * t)
+        else:
+            u = np.full_like(t, self.amplitude)
+        out = np.where(on, u, 0.0)
+        return float(out) if out.ndim == 0 else out
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """A planned campaign.
+
+    Attributes
+    ----------
+    fps : float
+        Camera frame rate, frames/s.
+    update_hz : float
+        Rate at which commands are streamed to the servo (its PWM rate), Hz.
+    settle_s : float
+        Time after t0 before the response is steady; also written as the
+        manifest's ``[analysis] settle_s``, s.
+    periods : float
+        Periods wanted after settling in each sine dwell.
+    min_seconds : float
+        Shortest input duration of a dwell, s.
+    lead_in_s : float
+        Servo at centre with the LED lit, camera rolling, before t0, s.
+    tail_s : float
+        Servo back at centre after the input, before the camera stops, s.
+    rest_s : float
+        Wait between dwells, s.
+    dwells : tuple of Dwell
+        The tests in order.
+    markers : dict
+        The manifest's ``[markers]`` table.
+    units : str
+        The manifest's ``[input] units``.
+    camera : dict
+        The manifest's ``[camera]`` table, passed through (may be empty).
+    drive : dict
+        After driving: the rig settings used (``[plan.drive]``).
+    """
+
+    fps: float
+    update_hz: float
+    settle_s: float
+    periods: float
+    min_seconds: float
+    lead_in_s: float
+    tail_s: float
+    rest_s: float
+    dwells: tuple[Dwell, ...]
+    markers: dict[str, str] = field(default_factory=lambda: dict(_DEFAULT_MARKERS))
+    units: str = "normalized"
+    camera: dict[str, Any] = field(default_factory=dict)
+    drive: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def warnings(self) -> list[str]:
+        """All dwells' warnings, each prefixed with its frequency."""
+        return [w for d in self.dwells for w in d.warnings]
+
+    @property
+    def total_s(self) -> float:
+        """Time the rig runs the plan, not counting the camera prompts, s."""
+        return sum(self.lead_in_s + d.duration_s + self.tail_s for d in self.dwells) + self.rest_s * max(len(self.dwells) - 1, 0)
+
+
+def fold_hz(frequency_hz: float, sample_hz: float) -> float:
+    """Where a tone appears after sampling: ``|f − sample_hz·round(f/sample_hz)|``, Hz (in 0…sample_hz/2)."""
+    return abs(frequency_hz - sample_hz * round(frequency_hz / sample_hz))
+
+
+def dwell_duration_s(frequency_hz: float, periods: float, settle_s: float, min_seconds: float) -> float:
+    """Input duration of a sine dwell, s.
+
+    ``settle_s`` plus ``periods`` periods, at least ``min_seconds``, rounded up
+    to a whole number of periods so that the command ends at zero (no jump
+    when it returns to centre).
+    """
+    wanted_s = max(min_seconds, settle_s + periods / frequency_hz)
+    n_periods = math.ceil(wanted_s * frequency_hz - 1e-9)
+    return n_periods / frequency_hz
+
+
+def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analysed_s: float | None = None) -> list[str]:
+    """Why a sine dwell at ``frequency_hz`` may measure badly.
+
+    Parameters
+    ----------
+    frequency_hz : float
+        Dwell frequency, Hz.
+    fps : float
+        Camera frame rate, frames/s.
+    update_hz : float
+        Servo command update (PWM) rate, Hz.
+    analysed_s : float, optional
+        Steady-state time the fit sees (duration − settle), s; sets the
+        frequency resolution ``1/analysed_s`` of the PWM-ripple check. Without
+        it a 2 % band is used.
+
+    Returns
+    -------
+    list of str
+        One line per problem, each starting with the frequency.
+    """
+    f = float(frequency_hz)
+    tag = f"{f:g} Hz"
+    out: list[str] = []
+    # Camera sampling.
+    if f > fps / 2:
+        out.append(f"{tag}: above half the frame rate ({fps / 2:g} Hz); the camera sees it at {fold_hz(f, fps):.3g} Hz")
+    elif fps / f < MIN_FRAMES_PER_PERIOD:
+        out.append(f"{tag}: only {fps / f:.1f} frames per period at {fps:g} fps (fewer than {MIN_FRAMES_PER_PERIOD:g})")
+    # Servo command stream: a staircase sampled at update_hz.
+    if f >= update_hz / 2:
+        out.append(
+            f"{tag}: at or above half the servo update rate ({update_hz / 2:g} Hz); "
+            f"the servo receives its alias at {fold_hz(f, update_hz):.3g} Hz"
+        )
+    elif update_hz / f < MIN_UPDATES_PER_PERIOD:
+        out.append(
+            f"{tag}: only {update_hz / f:.1f} servo updates per period at {update_hz:g} Hz "
+            f"(the staircase's image at {update_hz - f:.3g} Hz is nearly as strong)"
+        )
+    # PWM-frame ripple at k·update_hz as the camera sees it.
+    tol_hz = max(1.0 / analysed_s, 0.02 * f) if analysed_s and analysed_s > 0 else 0.02 * f
+    for k in range(1, PWM_HARMONICS + 1):
+        ripple_hz = fold_hz(k * update_hz, fps)
+        if abs(f - ripple_hz) < tol_hz:
+            harmonic = f"{k}×" if k > 1 else ""
+            out.append(
+                f"{tag}: within {tol_hz:.2g} Hz of the servo's PWM ripple ({harmonic}{update_hz:g} Hz), "
+                f"which the camera at {fps:g} fps sees at {ripple_hz:.3g} Hz"
+            )
+            break
+    return out
+
+
+def _positive(value: float, option: str, *, allow_zero: bool = False) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ServoscopeError(f"{option} {value:g}: must be {'≥ 0' if allow_zero else '> 0'}")
+    return value
+
+
+def plan_sweep(
+    fps: float,
+    from_hz: float,
+    to_hz: float,
+    *,
+    points: int = 14,
+    amplitude: float = 0.1,
+    periods: float = 8,
+    min_seconds: float = 3.0,
+    settle_s: float = 1.0,
+    update_hz: float = 50.0,
+    step: bool = True,
+    step_amplitude: float = 0.5,
+    step_seconds: float = 3.0,
+    lead_in_s: float = 1.0,
+    tail_s: float = 0.5,
+    rest_s: float = 2.0,
+    markers: dict[str, str] | None = None,
+    units: str = "normalized",
+) -> SweepPlan:
+    """Plan a log-spaced sine sweep and a final step test.
+
+    Parameters
+    ----------
+    fps : float
+        Camera frame rate, frames/s.
+    from_hz, to_hz : float
+        Lowest and highest dwell frequency, Hz.
+    points : int
+        Number of dwell frequencies (log-spaced, rounded to 3 significant digits).
+    amplitude : float
+        Sine amplitude, input units.
+    periods : float
+        Periods wanted after ``settle_s`` in each dwell.
+    min_seconds : float
+        Shortest input duration, s.
+    settle_s : float
+        Settling time after t0, s.
+    update_hz : float
+        Command update rate (the servo's PWM rate), Hz.
+    step : bool
+        Append a step test.
+    step_amplitude : float
+        Step size, input units (≠ 0).
+    step_seconds : float
+        Step duration, s (at least ``min_seconds``).
+    lead_in_s, tail_s, rest_s : float
+        Time before t0, after the input, and between dwells, s.
+    markers : dict, optional
+        ``[markers]`` colours (default: red lead, green trail, yellow LED).
+    units : str
+        ``[input] units``.
+
+    Returns
+    -------
+    SweepPlan
+
+    Raises
+    ------
+    ServoscopeError
+        For an option out of range (the message names the option).
+    """
+    fps = _positive(fps, "--fps")
+    from_hz = _positive(from_hz, "--from")
+    to_hz = _positive(to_hz, "--to")
+    update_hz = _positive(update_hz, "--update-hz")
+    amplitude = _positive(amplitude, "--amplitude")
+    periods = _positive(periods, "--periods")
+    min_seconds = _positive(min_seconds, "--min-seconds", allow_zero=True)
+    settle_s = _positive(settle_s, "--settle", allow_zero=True)
+    lead_in_s = _positive(lead_in_s, "--lead-in", allow_zero=True)
+    tail_s = _positive(tail_s, "--tail", allow_zero=True)
+    rest_s = _positive(rest_s, "--rest", allow_zero=True)
+    if to_hz < from_hz:
+        raise ServoscopeError(f"--to {to_hz:g} is below --from {from_hz:g}")
+    if int(points) != points or points < 1:
+        raise ServoscopeError(f"--points {points}: must be a whole number ≥ 1")
+    points = int(points)
+    if points == 1 and to_hz != from_hz:
+        raise ServoscopeError("--points 1 needs --from equal to --to (or use --points ≥ 2)")
+    if step and (not math.isfinite(step_amplitude) or step_amplitude == 0):
+        raise ServoscopeError("--step-amplitude must be ≠ 0 (or use --no-step)")
+    if step:
+        step_seconds = _positive(step_seconds, "--step-seconds")
+
+    raw_hz = np.geomspace(from_hz, to_hz, points) if points > 1 else np.array([from_hz])
+    # 3 significant digits: readable file names and tables, spacing still log to ±0.5 %.
+    freqs_hz = [float(f"{f:.3g}") for f in raw_hz]
+    if len(set(freqs_hz)) != len(freqs_hz):
+        raise ServoscopeError(f"--points {points}: too many for {from_hz:g}…{to_hz:g} Hz (frequencies coincide)")
+
+    dwells = []
+    for f in freqs_hz:
+        duration = dwell_duration_s(f, periods, settle_s, min_seconds)
+        dwells.append(Dwell("sine", amplitude, f, duration, tuple(frequency_warnings(f, fps, update_hz, duration - settle_s))))
+    if step:
+        dwells.append(Dwell("step", float(step_amplitude), None, max(step_seconds, min_seconds)))
+    return SweepPlan(
+        fps=fps, update_hz=update_hz, settle_s=settle_s, periods=periods, min_seconds=min_seconds,
+        lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s, dwells=tuple(dwells),
+        markers=dict(markers or _DEFAULT_MARKERS), units=units,
+    )
+
+
+def default_video_name(index: int, dwell: Dwell, n_steps: int = 1) -> str:
+    """The video name ``drive`` gives a test: ``dwell_01_0.50Hz.mp4`` or ``step.mp4``.
+
+    Parameters
+    ----------
+    index : int
+        1-based position of the test in the plan.
+    dwell : Dwell
+    n_steps : int
+        Number of step tests in the plan (numbered ``step_NN.mp4`` when > 1).
+    """
+    if dwell.kind == "sine":
+        return f"dwell_{index:02d}_{dwell.frequency_hz:.2f}Hz.mp4"
+    return "step.mp4" if n_steps <= 1 else f"step_{index:02d}.mp4"
+
+
+# ---------------------------------------------------------------------------
+# TOML text (written by hand: no tomli_w dependency).
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f"cannot write {value} to TOML")
+        return repr(value)  # shortest round-trip form; valid TOML (e.g. 0.5, 1e-05)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # JSON string escapes are valid TOML basic strings
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _toml_table(lines: list[str], header: str, table: dict[str, Any]) -> None:
+    lines.append(header)
+    for key, value in table.items():
+        if value is not None:
+            lines.append(f"{key} = {_toml_value(value)}")
+    lines.append("")
+
+
+def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
+    """The plan (or, with videos filled in, the campaign) as TOML text.
+
+    Parameters
+    ----------
+    plan : SweepPlan
+    include_plan : bool
+        Write the ``[plan]`` table (rig information the analysis ignores).
+
+    Returns
+    -------
+    str
+        TOML that :func:`tomllib.loads` reads back to the same plan.
+    """
+    lines = ["# servoscope campaign plan: `servoscope drive` fills in the videos", ""]
+    if plan.camera:
+        _toml_table(lines, "[camera]", plan.camera)
+    _toml_table(lines, "[markers]", plan.markers)
+    _toml_table(lines, "[input]", {"units": plan.units})
+    _toml_table(lines, "[analysis]", {"settle_s": float(plan.settle_s)})
+    for d in plan.dwells:
+        _toml_table(lines, "[[tests]]", {
+            "video": d.video, "label": d.label, "kind": d.kind,
+            "frequency_hz": None if d.frequency_hz is None else float(d.frequency_hz),
+            "amplitude": float(d.amplitude),
+        })
+    if include_plan:
+        _toml_table(lines, "[plan]", {
+            "fps": float(plan.fps), "update_hz": float(plan.update_hz), "settle_s": float(plan.settle_s),
+            "periods": float(plan.periods), "min_seconds": float(plan.min_seconds),
+            "lead_in_s": float(plan.lead_in_s), "tail_s": float(plan.tail_s), "rest_s": float(plan.rest_s),
+        })
+        if plan.drive:
+            _toml_table(lines, "[plan.drive]", plan.drive)
+        for d in plan.dwells:
+            _toml_table(lines, "[[plan.dwells]]", {
+                "duration_s": float(d.duration_s), "warnings": list(d.warnings),
+                "max_late_ms": d.max_late_ms,
+            })
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def write_plan(plan: SweepPlan, path: str | Path) -> Path:
+    """Write :func:`plan_to_toml` to ``path``; returns the path."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(plan_to_toml(plan), encoding="utf-8")
+    except OSError as exc:
+        raise ServoscopeError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    return path
+
+
+def _num(path: Path, where: str, value: Any, *, positive: bool = False, allow_zero: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ServoscopeError(f"{path}: {where} must be a number")
+    value = float(value)
+    if positive and (value < 0 or (value == 0 and not allow_zero)):
+        raise ServoscopeError(f"{path}: {where} must be {'≥ 0' if allow_zero else '> 0'}")
+    return value
+
+
+def read_plan(path: str | Path) -> SweepPlan:
+    """Read a plan written by ``servoscope plan`` (or a campaign written by ``drive``).
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    SweepPlan
+
+    Raises
+    ------
+    ServoscopeError
+        If the file is missing, not TOML, has no ``[plan]`` table, or its
+        tests and ``[[plan.dwells]]`` disagree.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ServoscopeError(f"{path}: no such plan (make one with `servoscope plan`)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ServoscopeError(f"{path}: cannot read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ServoscopeError(f"{path}: not valid TOML ({exc})") from None
+    plan_t = data.get("plan")
+    if not isinstance(plan_t, dict):
+        raise ServoscopeError(f"{path}: no [plan] table (make a plan with `servoscope plan`)")
+    for key in plan_t:
+        if key not in _PLAN_KEYS:
+            raise ServoscopeError(f"{path}: [plan] has an unknown key {key!r}")
+    tests = data.get("tests")
+    dwells_t = plan_t.get("dwells")
+    if not isinstance(tests, list) or not tests:
+        raise ServoscopeError(f"{path}: no [[tests]]")
+    if not isinstance(dwells_t, list) or len(dwells_t) != len(tests):
+        raise ServoscopeError(f"{path}: [[plan.dwells]] must have one entry per [[tests]] ({len(tests)})")
+    get = lambda key, default=None, **kw: _num(path, f"[plan] {key}", plan_t.get(key, default), **kw)  # noqa: E731
+    dwells = []
+    for i, (entry, extra) in enumerate(zip(tests, dwells_t), start=1):
+        where = f"[[tests]] #{i}"
+        if not isinstance(entry, dict) or not isinstance(extra, dict):
+            raise ServoscopeError(f"{path}: {where} must be a table")
+        for key in entry:
+            if key not in _TEST_KEYS:
+                raise ServoscopeError(f"{path}: {where} has an unknown key {key!r} (a plan's tests take {', '.join(sorted(_TEST_KEYS))})")
+        for key in extra:
+            if key not in _DWELL_KEYS:
+                raise ServoscopeError(f"{path}: [[plan.dwells]] #{i} has an unknown key {key!r}")
+        kind = entry.get("kind")
+        if kind not in ("sine", "step"):
+            raise ServoscopeError(f"{path}: {where}: kind must be \"sine\" or \"step\", not {kind!r}")
+        amplitude = _num(path, f"{where} amplitude", entry.get("amplitude"))
+        if amplitude == 0 or (kind == "sine" and amplitude < 0):
+            raise ServoscopeError(f"{path}: {where} amplitude must be {'> 0' if kind == 'sine' else '≠ 0'}")
+        freq = None
+        if kind == "sine":
+            freq = _num(path, f"{where} frequency_hz", entry.get("frequency_hz"), positive=True, allow_zero=False)
+        duration = _num(path, f"[[plan.dwells]] #{i} duration_s", extra.get("duration_s"), positive=True, allow_zero=False)
+        warnings = extra.get("warnings", [])
+        if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+            raise ServoscopeError(f"{path}: [[plan.dwells]] #{i} warnings must be a list of text")
+        for key in ("video", "label"):
+            if key in entry and not (isinstance(entry[key], str) and entry[key]):
+                raise ServoscopeError(f"{path}: {where} {key} must be text")
+        dwells.append(Dwell(kind, amplitude, freq, duration, tuple(warnings), entry.get("video"), entry.get("label"),
+                            extra.get("max_late_ms")))
+    markers = data.get("markers", dict(_DEFAULT_MARKERS))
+    units = data.get("input", {}).get("units", "normalized")
+    camera = data.get("camera", {})
+    if not isinstance(markers, dict) or not isinstance(camera, dict) or not isinstance(units, str):
+        raise ServoscopeError(f"{path}: [markers], [camera] must be tables and [input] units text")
+    drive = plan_t.get("drive", {})
+    return SweepPlan(
+        fps=get("fps", positive=True, allow_zero=False),
+        update_hz=get("update_hz", 50.0, positive=True, allow_zero=False),
+        settle_s=get("settle_s", data.get("analysis", {}).get("settle_s", 0.5), positive=True),
+        periods=get("periods", 8.0, positive=True, allow_zero=False),
+        min_seconds=get("min_seconds", 0.0, positive=True),
+        lead_in_s=get("lead_in_s", 1.0, positive=True),
+        tail_s=get("tail_s", 0.5, positive=True),
+        rest_s=get("rest_s", 2.0, positive=True),
+        dwells=tuple(dwells), markers=dict(markers), units=units, camera=dict(camera),
+        drive=dict(drive) if isinstance(drive, dict) else {},
+    )
+
+
+def with_videos(plan: SweepPlan, videos: list[str]) -> SweepPlan:
+    """The plan with the given video names (one per test, in order)."""
+    return replace(plan, dwells=tuple(replace(d, video=v) for d, v in zip(plan.dwells, videos, strict=True)))

@@ -1,0 +1,154 @@
+"""Named simulation campaigns: the paper's experiment and a quick one for tests."""
+
+from __future__ import annotations
+
+import math
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from ..camera.model import CameraModel
+from ..errors import ServoscopeError
+from .scene import REFERENCE_SIZE, Scene
+from .servo import ServoModel
+
+__all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "get_preset"]
+
+#: The paper's fit: G(s) = 0.23·37² / (s² + 2·0.65·37·s + 37²), dead time 85 ms.
+PAPER_SERVO = ServoModel(num=(0.23 * 37.0**2,), den=(1.0, 2.0 * 0.65 * 37.0, 37.0**2), dead_time_s=0.085)
+
+
+@dataclass(frozen=True)
+class CampaignPreset:
+    """Everything that defines a simulated measurement campaign.
+
+    Parameters
+    ----------
+    name : str
+        Preset name, recorded in truth.json.
+    servo : ServoModel
+        The true actuator.
+    frequencies_hz : tuple of float
+        Sine dwell frequencies, Hz.
+    sine_amplitude, step_amplitude : float
+        Input amplitudes, input units.
+    input_units : str
+        Name of the input units (campaign.toml ``[input] units``).
+    include_step : bool
+        Whether to record the step test.
+    width, height : int
+        Frame size, pixels (even).
+    fps : float or Fraction
+        Frame rate.
+    codec : {"h264", "raw"}
+        Video codec (see :class:`servoscope.video.writer.VideoWriter`).
+    bit_rate : int
+        H.264 bit rate, bit/s.
+    x264_preset : str
+        x264 speed preset.
+    noise_sigma_dn : float
+        Sensor noise, DN.
+    exposure_s : float
+        Exposure time, seconds.
+    pre_roll_s : float
+        Time with the LED lit before the input starts (t0 is this plus a
+        seeded fraction of a frame, so it never falls on a frame boundary).
+    settle_s : float
+        Sine dwells: time after t0 allowed for the transient.
+    min_dwell_s, min_periods : float
+        Sine dwells record ``max(min_dwell_s, min_periods / f)`` after settling.
+    step_after_t0_s : float
+        Length of the step test after t0, seconds.
+    focal_px : float
+        Focal length at the reference size 720×576 (scaled with the image).
+    principal_offset_px : (float, float)
+        Principal point minus image centre at the reference size.
+    dist_coeffs : tuple of float
+        Brown–Conrady ``[k1, k2, p1, p2, k3]``.
+    scene : Scene or None
+        What is filmed; None means ``Scene.for_size(width, height)`` with the
+        campaign seed as background seed.
+    """
+
+    name: str
+    servo: ServoModel
+    frequencies_hz: tuple[float, ...]
+    sine_amplitude: float = 0.1
+    step_amplitude: float = 0.5
+    input_units: str = "normalized"
+    include_step: bool = True
+    width: int = 720
+    height: int = 576
+    fps: float | Fraction = 100
+    codec: str = "h264"
+    bit_rate: int = 20_000_000
+    x264_preset: str = "ultrafast"
+    noise_sigma_dn: float = 1.5
+    exposure_s: float = 1.0 / 250.0
+    pre_roll_s: float = 0.5
+    settle_s: float = 0.5
+    min_dwell_s: float = 3.0
+    min_periods: float = 4.0
+    step_after_t0_s: float = 1.5
+    focal_px: float = 1100.0
+    principal_offset_px: tuple[float, float] = (3.2, -2.1)
+    dist_coeffs: tuple[float, ...] = (-0.08, 0.02, 4e-4, -3e-4, 0.0)
+    scene: Scene | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
+        if any(not (f > 0 and math.isfinite(f)) for f in freqs):
+            raise ServoscopeError("frequencies_hz must be positive")
+        object.__setattr__(self, "frequencies_hz", freqs)
+        if not freqs and not self.include_step:
+            raise ServoscopeError("a campaign needs at least one test")
+        if not (self.noise_sigma_dn >= 0 and self.exposure_s >= 0 and self.pre_roll_s >= 0 and self.settle_s >= 0):
+            raise ServoscopeError("noise_sigma_dn, exposure_s, pre_roll_s and settle_s must be >= 0")
+        if not (self.min_dwell_s > 0 and self.min_periods >= 0 and self.step_after_t0_s > 0):
+            raise ServoscopeError("min_dwell_s and step_after_t0_s must be > 0, min_periods >= 0")
+        if self.exposure_s * float(Fraction(self.fps).limit_denominator(1_000_000)) > 1.0 + 1e-12:
+            raise ServoscopeError("exposure_s cannot exceed the frame interval")
+        if self.scene is not None and (self.scene.width, self.scene.height) != (self.width, self.height):
+            raise ServoscopeError("the scene's size differs from the video size")
+
+    def dwell_duration_s(self, frequency_hz: float, t0_s: float) -> float:
+        """Length of the sine dwell at ``frequency_hz`` that starts at ``t0_s``."""
+        return t0_s + self.settle_s + max(self.min_dwell_s, self.min_periods / frequency_hz)
+
+    def camera(self) -> CameraModel:
+        """The true camera, its intrinsics scaled from the reference size."""
+        s = min(self.width / REFERENCE_SIZE[0], self.height / REFERENCE_SIZE[1])
+        f = self.focal_px * s
+        cx = (self.width - 1) / 2.0 + self.principal_offset_px[0] * s
+        cy = (self.height - 1) / 2.0 + self.principal_offset_px[1] * s
+        k = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+        return CameraModel((self.width, self.height), k, np.asarray(self.dist_coeffs, dtype=float))
+
+
+PRESETS: dict[str, CampaignPreset] = {
+    "paper": CampaignPreset(
+        name="paper",
+        servo=PAPER_SERVO,
+        frequencies_hz=tuple(float(f) for f in np.geomspace(0.5, 15.0, 14)),
+    ),
+    "quick": CampaignPreset(
+        name="quick",
+        servo=PAPER_SERVO,
+        frequencies_hz=tuple(float(f) for f in np.geomspace(1.0, 12.0, 4)),
+        pre_roll_s=0.2,
+        settle_s=0.2,
+        min_dwell_s=0.8,
+        min_periods=0.0,
+        step_after_t0_s=0.6,
+    ),
+}
+
+
+def get_preset(name: str) -> CampaignPreset:
+    """The preset called ``name``; ServoscopeError if there is none."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ServoscopeError(f"unknown simulation preset {name!r} (choose from {', '.join(sorted(PRESETS))})") from None

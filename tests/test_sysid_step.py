@@ -1,0 +1,141 @@
+"""Tests for servoscope.sysid.step (oracle: python-control step responses / step_info)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import control
+import numpy as np
+import pytest
+
+from servoscope.errors import ServoscopeError
+from servoscope.sysid import analyse_step, model_step_metrics
+
+K, WN, ZETA = 0.23, 37.0, 0.65
+PAPER_G = control.tf([K * WN**2], [1.0, 2 * ZETA * WN, WN**2])
+TAU = 0.085
+T0 = 0.30370  # off the 100 fps frame grid
+STEP = 0.5
+BASE = 0.02
+FPS = 100.0
+
+_FINE = np.arange(0.0, 2.0, 1e-5)
+_FINE_Y = np.asarray(control.step_response(PAPER_G, T=_FINE).outputs).ravel()
+# Independent oracle for the metrics: step_info on a 10 us grid.
+INFO = control.step_info(PAPER_G, T=_FINE, SettlingTimeThreshold=0.02, RiseTimeLimits=(0.1, 0.9))
+
+
+def truth(t, tau=TAU, step=STEP):
+    """Noise-free response of G(s)e^{-s tau} to a step of `step` at T0."""
+    return BASE + step * np.interp(t - T0 - tau, _FINE, _FINE_Y, left=0.0)
+
+
+def record(seed, n=150, sigma=1e-4, step=STEP):
+    t = np.arange(n) / FPS
+    y = truth(t, step=step) + sigma * np.random.default_rng(seed).standard_normal(n)
+    return t, y
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_step_metrics_and_dead_time(seed):
+    t, y = record(seed)
+    r = analyse_step(t, y, t0_s=T0, step_size=STEP, model=PAPER_G)
+    assert abs(r.dead_time_s - TAU) < 1e-3
+    assert abs(r.dead_time_s - TAU) < 5 * r.dead_time_stderr_s
+    assert r.dead_time_stderr_s < 2e-4
+    assert r.rise_time_s == pytest.approx(INFO["RiseTime"], abs=5e-4)
+    assert r.overshoot_pct == pytest.approx(INFO["Overshoot"], abs=0.25)
+    assert r.settling_time_s == pytest.approx(INFO["SettlingTime"] + TAU, abs=5e-3)
+    assert r.peak_time_s == pytest.approx(INFO["PeakTime"] + TAU, abs=0.01)
+    assert r.initial_value == pytest.approx(BASE, abs=1e-4)
+    assert r.final_value == pytest.approx(BASE + K * STEP, abs=5e-4)
+    assert r.gain == pytest.approx(K, rel=0.005)
+    assert r.fitted_gain == pytest.approx(K, abs=4 * r.fitted_gain_stderr)
+    assert r.noise_sigma == pytest.approx(1e-4, rel=0.5)
+    # Frame counting is late by the time the response needs to reach 2 %,
+    # plus at most one frame.
+    t_reach = _FINE[np.nonzero(_FINE_Y > 0.02 * K)[0][0]]
+    assert TAU + t_reach - 1e-3 <= r.dead_time_threshold_s <= TAU + t_reach + 1 / FPS + 1e-3
+    # Prediction reproduces the noise-free truth.
+    np.testing.assert_allclose(r.predicted(t), truth(t), atol=3e-4)
+    assert np.std(r.residual) == pytest.approx(1e-4, rel=0.3)
+    assert r.warnings == ()
+
+
+def test_noise_free_dead_time_is_sub_frame_exact():
+    t = np.arange(150) / FPS
+    r = analyse_step(t, truth(t), t0_s=T0, step_size=STEP, model=PAPER_G)
+    assert r.dead_time_s == pytest.approx(TAU, abs=2e-5)
+    assert r.fitted_gain == pytest.approx(K, rel=1e-4)
+
+
+def test_negative_step_and_valid_mask():
+    t, y = record(5, step=-STEP)
+    valid = np.ones(t.size, bool)
+    valid[80:83] = False
+    y[80:83] = 10.0  # garbage on invalid frames
+    y[100] = np.nan
+    r = analyse_step(t, y, t0_s=T0, step_size=-STEP, valid=valid, model=PAPER_G)
+    assert r.gain == pytest.approx(K, rel=0.005)
+    assert r.change < 0
+    assert abs(r.dead_time_s - TAU) < 1e-3
+    assert r.rise_time_s == pytest.approx(INFO["RiseTime"], abs=1e-3)
+    assert r.overshoot_pct == pytest.approx(INFO["Overshoot"], abs=0.5)
+    assert r.time_s.size == t.size - 4
+
+
+def test_without_model():
+    t, y = record(3)
+    r = analyse_step(t, y, t0_s=T0, step_size=STEP)
+    assert r.dead_time_s is None and r.dead_time_stderr_s is None and r.residual is None
+    assert np.isfinite(r.dead_time_threshold_s)
+    with pytest.raises(ServoscopeError):
+        r.predicted(t)
+    s = r.summary()
+    json.dumps(s, allow_nan=False)
+    assert s["dead_time_s"] is None
+    for key in ("rise_time_s", "overshoot_pct", "settling_time_s", "dead_time_s", "dead_time_stderr_s",
+                "dead_time_threshold_s", "final_value", "initial_value", "gain"):
+        assert key in s
+
+
+def test_unsettled_record_warns():
+    t = np.arange(56) / FPS  # ends ~0.17 s after the delayed response starts
+    y = truth(t)
+    r = analyse_step(t, y, t0_s=T0, step_size=STEP)
+    assert np.isnan(r.settling_time_s) or r.warnings
+
+
+def test_model_step_metrics_matches_step_info():
+    m = model_step_metrics(PAPER_G, dead_time_s=TAU)
+    assert m["rise_time_s"] == pytest.approx(INFO["RiseTime"], abs=1e-4)
+    assert m["overshoot_pct"] == pytest.approx(INFO["Overshoot"], abs=1e-3)
+    assert m["settling_time_s"] == pytest.approx(INFO["SettlingTime"] + TAU, abs=1e-4)
+    assert m["steady_state_value"] == pytest.approx(K)
+    # Analytic overshoot of a 2nd-order system.
+    assert m["overshoot_pct"] == pytest.approx(100 * np.exp(-np.pi * ZETA / np.sqrt(1 - ZETA**2)), abs=1e-3)
+
+
+def test_bad_input_raises():
+    t, y = record(0)
+    with pytest.raises(ServoscopeError):  # no pre-roll
+        analyse_step(t, y, t0_s=-1.0, step_size=STEP)
+    with pytest.raises(ServoscopeError):  # too few samples after t0
+        analyse_step(t, y, t0_s=t[-3], step_size=STEP)
+    with pytest.raises(ServoscopeError):
+        analyse_step(t, y, t0_s=T0, step_size=0.0)
+    with pytest.raises(ServoscopeError):
+        analyse_step(t, y[:-1], t0_s=T0, step_size=STEP)
+    with pytest.raises(ServoscopeError):  # unstable model
+        analyse_step(t, y, t0_s=T0, step_size=STEP, model=control.tf([1.0], [1.0, -1.0]))
+
+
+def test_to_pandas_or_clear_import_error():
+    t, y = record(0)
+    r = analyse_step(t, y, t0_s=T0, step_size=STEP, model=PAPER_G)
+    if importlib.util.find_spec("pandas") is None:
+        with pytest.raises(ImportError, match="pandas"):
+            r.to_pandas()
+    else:
+        assert list(r.to_pandas().columns) == ["time_s", "y", "predicted"]
