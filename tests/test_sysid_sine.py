@@ -71,7 +71,7 @@ def test_stderr_is_honest_monte_carlo():
     rep = {"a": [], "p": [], "f": []}
     for seed in range(50):
         rng = np.random.default_rng(1000 + seed)
-        r = fit_sine(t, clean + 1e-4 * rng.standard_normal(t.size), f, t0_s=T0)
+        r = fit_sine(t, clean + 1e-4 * rng.standard_normal(t.size), f, t0_s=T0, refine_frequency=True)
         est["a"].append(r.amplitude)
         est["p"].append(r.phase_rad)
         est["f"].append(r.frequency_hz)
@@ -207,3 +207,30 @@ def test_to_pandas_or_clear_import_error():
         df = r.to_pandas()
         assert list(df.columns) == ["time_s", "y", "fitted", "residual"]
         assert len(df) == r.n_samples
+
+
+def test_auto_refinement_keeps_commanded_frequency_on_short_windows():
+    """On half a period a free frequency costs phase accuracy; "auto" does not pay it."""
+    t = np.arange(0.0, 1.2, 0.01)
+    t0, f, ph = 0.2, 1.0, -0.4
+    spread = {}
+    for mode in ("auto", True):
+        phases = []
+        for seed in range(40):
+            rng = np.random.default_rng(seed)
+            y = np.where(t >= t0, 0.02 * np.sin(2 * np.pi * f * (t - t0) + ph), 0.0) + 2e-4 * rng.standard_normal(t.size)
+            r = fit_sine(t, y, f, t0_s=t0, settle_s=0.5, refine_frequency=mode)
+            phases.append(r.phase_rad)
+            if mode == "auto":
+                assert abs(r.phase_rad - ph) < 5 * r.phase_stderr_rad
+        spread[mode] = np.std(phases)
+    assert spread["auto"] < 0.5 * spread[True]
+
+
+def test_t0_uncertainty_widens_the_phase_error():
+    t = frames()
+    y = sine(t, 0.05, 4.0, 0.2) + 1e-4 * np.random.default_rng(5).standard_normal(t.size)
+    a = fit_sine(t, y, 4.0, t0_s=T0)
+    b = fit_sine(t, y, 4.0, t0_s=T0, t0_stderr_s=1e-3)
+    assert b.phase_stderr_rad == pytest.approx(math.hypot(a.phase_stderr_rad, 2 * math.pi * 4.0 * 1e-3), rel=1e-9)
+    assert b.phase_rad == a.phase_rad

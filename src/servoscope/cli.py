@@ -144,16 +144,18 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @cli.command()
 @click.argument("campaign", type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder for result.json, report.html, tracks/.")
+@click.option("--fit", "fit_mode", type=click.Choice(["auto", "magnitude", "complex"]), default="auto", show_default=True,
+              help="magnitude: |G| only (the paper's); complex: magnitude and phase with a dead time; auto: complex when every dwell's input start is known.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
-def identify(campaign: Path, out_dir: Path, quiet: bool, as_json: bool) -> None:
+def identify(campaign: Path, out_dir: Path, fit_mode: str, quiet: bool, as_json: bool) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign
 
     manifest = load_campaign(campaign)  # validates everything before --out is touched
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
-        result = run_identify(manifest, progress=progress)
+        result = run_identify(manifest, fit=fit_mode, progress=progress)
     paths = result.write(out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))

@@ -104,15 +104,31 @@ class IdentificationResult:
 
     @property
     def dead_time_s(self) -> float | None:
-        if self.step is None or self.step.dead_time_s is None or not math.isfinite(self.step.dead_time_s):
-            return None
-        return float(self.step.dead_time_s)
+        """Dead time: from the step test (LED off → blade moving, fitted against
+        the model), else from the dwells' phases (complex fit), else None."""
+        if self.step is not None and self.step.dead_time_s is not None and math.isfinite(self.step.dead_time_s):
+            return float(self.step.dead_time_s)
+        if self.model.dead_time_s is not None and math.isfinite(self.model.dead_time_s):
+            return float(self.model.dead_time_s)
+        return None
+
+    @property
+    def dead_time_source(self) -> str | None:
+        if self.step is not None and self.step.dead_time_s is not None and math.isfinite(self.step.dead_time_s):
+            return "step test"
+        if self.model.dead_time_s is not None and math.isfinite(self.model.dead_time_s):
+            return "frequency response (phase)"
+        return None
 
     def summary(self) -> dict:
         """The content of ``result.json``: plain types only."""
         model = dict(jsonable(self.model.summary()))
+        # The model's own delay estimate (from the phases, complex fit) stays
+        # visible; the model's dead time is the best one available.
+        model["dead_time_from_phase_s"] = model.get("dead_time_s")
+        model["dead_time_from_phase_stderr_s"] = model.pop("dead_time_stderr_s", None)
         model["dead_time_s"] = self.dead_time_s
-        model["dead_time_source"] = "step test (model-based fit from the LED switch)" if self.dead_time_s is not None else None
+        model["dead_time_source"] = self.dead_time_source
         tests = []
         for test in self.campaign.tests:
             track = self.tracks[test.label]
@@ -195,6 +211,7 @@ def identify(
     campaign: Campaign | str | Path,
     *,
     tracks: dict[str, Track] | None = None,
+    fit: str = "auto",
     progress: ProgressFn | None = None,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -204,6 +221,11 @@ def identify(
     campaign : Campaign or path to campaign.toml
     tracks : dict of label → Track, optional
         Reuse tracks already computed (tracking is the expensive part).
+    fit : {"auto", "magnitude", "complex"}
+        "magnitude" fits |G| only, as the paper does (no dead time from the
+        dwells); "complex" fits magnitude and phase with a dead time, which
+        needs every dwell's input start (LED or t0_s); "auto" picks complex
+        when the phases are known.
     progress : callable(label, frames_done, test_index), optional
 
     Returns
@@ -231,25 +253,35 @@ def identify(
             warnings.append(f"{test.label}: only {track.n_valid} valid frames; dwell left out")
             continue
         try:
-            fit = fit_sine(
+            sine_fit = fit_sine(
                 track.time_s,
                 track.angle_rad,
                 test.frequency_hz,
                 t0_s=t0,
+                t0_stderr_s=track.t0_uncertainty_s if test.t0_s is None else None,
                 settle_s=campaign.settle_s,
                 valid=track.valid,
             )
         except ServoscopeError as exc:
             warnings.append(f"{test.label}: dwell left out: {exc}")
             continue
-        fits[test.label] = fit
+        fits[test.label] = sine_fit
         amplitudes.append(test.amplitude)
     if len(fits) < 3:
         raise ServoscopeError(
             f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
         )
     fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
-    model = fit_second_order(fr)
+    if fit not in ("auto", "magnitude", "complex"):
+        raise ServoscopeError(f"fit: unknown mode {fit!r} (use auto, magnitude or complex)")
+    phases_known = bool(np.all(np.isfinite(fr.phase_deg)))
+    if fit == "complex" and not phases_known:
+        raise ServoscopeError(
+            f"{campaign.path}: a complex fit needs every dwell's input start (an LED or t0_s); use --fit magnitude"
+        )
+    mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
+    model = fit_second_order(fr, mode=mode)
+    warnings.extend(model.warnings)
 
     step = None
     step_label = None

@@ -262,21 +262,20 @@ class _MarkerTracker:
         near = cv2.dilate(comp, np.ones((7, 7), np.uint8))
         far = cv2.dilate(comp, np.ones((13, 13), np.uint8))
         ring = far.astype(bool) & ~near.astype(bool)
-        if ring.sum() >= 8:
-            background_rgb = np.median(roi[ring], axis=0)
-        else:
-            background_rgb = np.zeros(3)
-        contrast = marker_rgb - background_rgb
-        norm2 = float(contrast @ contrast)
         support = near.astype(bool)
-        if norm2 < 100.0:
-            # Too little contrast to unmix: fall back to the binary flag (the paper's I(x, y)).
+        background = _local_background(roi, ring)
+        if background is None:
+            # No room around the blob (at the image border): the binary flag, the paper's I(x, y).
             weight = comp.astype(np.float64)
         else:
             # Linear unmixing: the fraction of each pixel that the marker covers,
-            # assuming the pixel is a blend of marker and local background colours.
-            alpha = ((roi - background_rgb) @ contrast) / norm2
-            weight = np.clip(alpha, 0.0, 1.0) * support
+            # the pixel being a blend of the marker's colour and the background
+            # just outside it (which may differ around the blob: a sticker on a
+            # blade's edge has blade on one side and sky on the other).
+            contrast = marker_rgb - background
+            norm2 = np.einsum("ijk,ijk->ij", contrast, contrast)
+            alpha = np.einsum("ijk,ijk->ij", roi - background, contrast) / np.maximum(norm2, 1e-9)
+            weight = np.where(norm2 >= 100.0, np.clip(alpha, 0.0, 1.0), comp) * support
         moments = weighted_moments(weight, (float(x0), float(y0)))
         if moments is None:
             return None
@@ -300,6 +299,23 @@ class _MarkerTracker:
 
     def lose(self) -> None:
         self.velocity = np.zeros(2)
+
+
+def _local_background(roi: np.ndarray, ring: np.ndarray) -> np.ndarray | None:
+    """Per-pixel background colour: that of the nearest ring pixel (smoothed).
+
+    Returns an array shaped like ``roi`` or None when the ring is too small.
+    """
+    if ring.sum() < 8:
+        return None
+    smooth = cv2.blur(roi, (3, 3))
+    # distanceTransformWithLabels labels every pixel with its nearest zero pixel.
+    _, labels = cv2.distanceTransformWithLabels(
+        (~ring).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+    )
+    lut = np.zeros((int(labels.max()) + 1, roi.shape[2]))
+    lut[labels[ring]] = smooth[ring]
+    return lut[labels]
 
 
 def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:

@@ -63,9 +63,15 @@ def build_report(result: "IdentificationResult") -> str:
         ["damping ratio ζ", model.damping_ratio, model.damping_ratio_stderr],
         ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s, None],
         ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi), None],
-        ["dead time τ (s)", dead, None if result.step is None else result.step.dead_time_stderr_s],
-        ["residual RMS of the magnitude fit (dB)", model.residual_rms_db, None],
+        [f"dead time τ (s), from the {result.dead_time_source or '—'}", dead, None if result.step is None else result.step.dead_time_stderr_s],
+        ["dead time from the dwells' phases (s)", model.dead_time_s, model.dead_time_stderr_s],
+        ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db, None],
+        ["residual RMS of the fit, phase (deg)", model.residual_rms_deg, None],
     ]
+    s.text(
+        "Fit: " + ("magnitude and phase with a dead time (the input start of every dwell is known from the LED)."
+                   if model.mode == "complex" else "magnitude only, as in the paper (the dead time cannot be identified from |G|).")
+    )
     s.table(["quantity", "value", "standard error"], rows)
     all_warnings = list(result.warnings) + [w for t in summary["tests"] for w in (f"{t['label']}: {x}" for x in t["warnings"])]
     if all_warnings:
@@ -83,7 +89,7 @@ def build_report(result: "IdentificationResult") -> str:
         fr.phase_deg,
         omega_grid / (2 * np.pi),
         model.magnitude(omega_grid),
-        model_phase_deg(model.transfer_function, omega_grid, dead),
+        model_phase_deg(model.transfer_function, omega_grid, model.dead_time_s if model.dead_time_s is not None else dead),
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot")

@@ -421,7 +421,9 @@ def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
     str
         TOML that :func:`tomllib.loads` reads back to the same plan.
     """
-    lines = ["# servoscope campaign plan: `servoscope drive` fills in the videos", ""]
+    complete = all(d.video for d in plan.dwells)
+    lines = ["# servoscope campaign, recorded by `servoscope drive`" if complete
+             else "# servoscope campaign plan: `servoscope drive` fills in the videos", ""]
     if plan.camera:
         _toml_table(lines, "[camera]", plan.camera)
     _toml_table(lines, "[markers]", plan.markers)

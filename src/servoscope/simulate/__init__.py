@@ -1,1 +1,30 @@
-"""servoscope.simulate"""
+"""Digital twin: simulated footage of a servo-driven rotor blade with a known answer.
+
+* :class:`InputSignal`, :class:`ServoModel` — the true actuator (TF, dead
+  time, optional quantization / rate limit / backlash) and its response.
+* :class:`Scene` — what the camera sees; :class:`FrameRenderer`,
+  :func:`render_frame`, :func:`polygon_coverage` — exact-area rendering with
+  lens distortion and sensor noise.
+* :func:`simulate_campaign` — videos + campaign.toml + camera.json + truth.json.
+"""
+
+from .campaign import simulate_campaign
+from .presets import PRESETS, CampaignPreset, PAPER_SERVO
+from .render import FrameRenderer, polygon_coverage, render_frame
+from .scene import Scene, led_exposure_fraction, marker_angle_rad
+from .servo import InputSignal, ServoModel
+
+__all__ = [
+    "InputSignal",
+    "ServoModel",
+    "Scene",
+    "FrameRenderer",
+    "render_frame",
+    "polygon_coverage",
+    "led_exposure_fraction",
+    "marker_angle_rad",
+    "simulate_campaign",
+    "CampaignPreset",
+    "PRESETS",
+    "PAPER_SERVO",
+]

@@ -270,7 +270,8 @@ def fit_sine(
     t0_s: float | None = None,
     settle_s: float = 0.5,
     valid: ArrayLike | None = None,
-    refine_frequency: bool = True,
+    refine_frequency: bool | str = "auto",
+    t0_stderr_s: float | None = None,
 ) -> SineFit:
     """Fit ``offset + amplitude*sin(2*pi*f*(t - t0) + phase)`` to a sine dwell.
 
@@ -289,9 +290,16 @@ def fit_sine(
         ``t0_s`` is None) to let the transient die out.
     valid : array_like of bool, shape (n,), optional
         False marks frames to exclude.
-    refine_frequency : bool, default True
-        Also fit the frequency (nonlinear least squares) instead of fixing it
-        at the commanded value.
+    refine_frequency : {"auto", True, False}, default "auto"
+        True: also fit the frequency (nonlinear least squares) instead of
+        fixing it at the commanded value. "auto": fit it, but keep the refined
+        value only when it differs from the commanded one by more than 3
+        standard errors (a free frequency on a short window costs phase
+        accuracy). In both cases ``frequency_stderr_hz`` is the refined
+        fit's standard error. False: the commanded frequency, no stderr.
+    t0_stderr_s : float, optional
+        Standard uncertainty of ``t0_s`` (s); it adds ``2πf·t0_stderr_s`` in
+        quadrature to the phase's standard error.
 
     Returns
     -------
@@ -385,8 +393,11 @@ def fit_sine(
                     f"{f_cmd:.4g} Hz (power there is {p_cmd / power[k]:.2g} of the peak)"
                 )
 
+    if refine_frequency not in (True, False, "auto"):
+        raise ServoscopeError(f"fit_sine: refine_frequency must be True, False or 'auto', got {refine_frequency!r}")
     p_names = 3
-    if refine_frequency and not flat:
+    refined_se: float | None = None
+    if refine_frequency is not False and not flat:
         two_pi = 2.0 * math.pi
         dtc = t - tc
 
@@ -404,15 +415,27 @@ def fit_sine(
             J[:, 3] = two_pi * dtc * (-p[1] * s + p[2] * c)
             return J
 
-        if n > 4:
+        if n > 5:
             sol = least_squares(resid, params, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-            params = sol.x
-            p_names = 4
-            if params[3] <= 0 or (span > 0 and abs(params[3] - f_cmd) > 2.0 / span):
-                warnings.append(
-                    f"refined frequency {params[3]:.4g} Hz is far from the commanded "
-                    f"{f_cmd:.4g} Hz"
-                )
+            J4 = jac(sol.x)
+            s2_refined = float(sol.fun @ sol.fun) / (n - 4)
+            try:
+                f_var = float(np.linalg.inv(J4.T @ J4)[3, 3]) * s2_refined
+            except np.linalg.LinAlgError:
+                f_var = float("inf")
+            refined_se = math.sqrt(max(f_var, 0.0))
+            # "auto" keeps the refined frequency only when the data say it
+            # differs from the commanded one: when the rig's and the camera's
+            # clocks agree, a free frequency only adds phase noise.
+            significant = abs(sol.x[3] - f_cmd) > 3.0 * refined_se
+            if sol.x[3] > 0 and (refine_frequency is True or significant):
+                params = sol.x
+                p_names = 4
+                if span > 0 and abs(params[3] - f_cmd) > 2.0 / span:
+                    warnings.append(
+                        f"refined frequency {params[3]:.4g} Hz is far from the commanded "
+                        f"{f_cmd:.4g} Hz"
+                    )
         Jm = jac(params)[:, :p_names]
     else:
         Jm = _design(t, f_cmd, tc)
@@ -441,7 +464,7 @@ def fit_sine(
     else:
         amp_se = math.sqrt(max(float(cov[1, 1] + cov[2, 2]) / 2.0, 0.0))
     offset_se = math.sqrt(max(float(cov[0, 0]), 0.0))
-    f_se: float | None = math.sqrt(max(float(cov[3, 3]), 0.0)) if p_names == 4 else None
+    f_se: float | None = math.sqrt(max(float(cov[3, 3]), 0.0)) if p_names == 4 else refined_se
 
     phase: float | None = None
     phase_se: float | None = None
@@ -457,6 +480,8 @@ def fit_sine(
         if p_names == 4:
             g_ph[3] = 2.0 * math.pi * lever
         phase_se = math.sqrt(max(float(g_ph @ cov @ g_ph), 0.0)) if amp > 0 else float("nan")
+        if t0_stderr_s is not None and math.isfinite(phase_se):
+            phase_se = math.hypot(phase_se, 2.0 * math.pi * f_hat * float(t0_stderr_s))
 
     fidelity = 1.0 - ssr / sst if sst > 0 else float("nan")
     ref = float(t0_s) if t0_s is not None else float(t[0])

@@ -28,9 +28,11 @@ from types import TracebackType
 import av
 import numpy as np
 
+from numba import njit
+
 from ..errors import ServoscopeError
 
-__all__ = ["VideoWriter", "CODECS", "container_suffixes"]
+__all__ = ["VideoWriter", "CODECS", "container_suffixes", "rgb_to_yuv420p"]
 
 #: Codec name → allowed file suffixes.
 CODECS: dict[str, tuple[str, ...]] = {"h264": (".mp4", ".mov"), "raw": (".avi", ".nut")}
@@ -42,6 +44,61 @@ def container_suffixes(codec: str) -> tuple[str, ...]:
         return CODECS[codec]
     except KeyError:
         raise ServoscopeError(f"unknown codec {codec!r} (choose from {sorted(CODECS)})") from None
+
+
+@njit(cache=True)
+def _rgb_to_yuv420p(rgb: np.ndarray, out: np.ndarray) -> None:
+    # One pass over 2x2 blocks: four luma samples and one chroma pair each.
+    h, w = rgb.shape[0], rgb.shape[1]
+    hw, ww = h // 2, w // 2
+    cb_off = h * w
+    cr_off = cb_off + hw * ww
+    flat = out.ravel()
+    for by in range(hw):
+        for bx in range(ww):
+            rs = np.float32(0.0)
+            gs = np.float32(0.0)
+            bs = np.float32(0.0)
+            for dy in range(2):
+                y = 2 * by + dy
+                for dx in range(2):
+                    x = 2 * bx + dx
+                    r = np.float32(rgb[y, x, 0])
+                    g = np.float32(rgb[y, x, 1])
+                    b = np.float32(rgb[y, x, 2])
+                    rs += r
+                    gs += g
+                    bs += b
+                    luma = np.float32(16.5) + (np.float32(65.481) * r + np.float32(128.553) * g
+                                               + np.float32(24.966) * b) * np.float32(1.0 / 255.0)
+                    flat[y * w + x] = np.uint8(np.int32(luma))
+            k = np.float32(0.25 / 255.0)
+            u = np.float32(128.5) + (np.float32(-37.797) * rs - np.float32(74.203) * gs + np.float32(112.0) * bs) * k
+            v = np.float32(128.5) + (np.float32(112.0) * rs - np.float32(93.786) * gs - np.float32(18.214) * bs) * k
+            flat[cb_off + by * ww + bx] = np.uint8(np.int32(u))
+            flat[cr_off + by * ww + bx] = np.uint8(np.int32(v))
+
+
+def rgb_to_yuv420p(frame_rgb_uint8: np.ndarray) -> np.ndarray:
+    """BT.601 limited-range ("TV") RGB → planar yuv420p, as FFmpeg's default.
+
+    Chroma is the mean of each 2×2 block (centre-sited). Faster than
+    libswscale's generic path, which took ~2 ms per 720×576 frame.
+
+    Parameters
+    ----------
+    frame_rgb_uint8 : ndarray of uint8, shape (h, w, 3), h and w even
+
+    Returns
+    -------
+    ndarray of uint8, shape (h * 3 // 2, w)
+        Y plane, then Cb, then Cr (PyAV's yuv420p ndarray layout).
+    """
+    a = np.ascontiguousarray(frame_rgb_uint8, dtype=np.uint8)
+    h, w = a.shape[:2]
+    out = np.empty((h * 3 // 2, w), dtype=np.uint8)
+    _rgb_to_yuv420p(a, out)
+    return out
 
 
 def _as_fraction(fps: float | int | Fraction) -> Fraction:
@@ -139,8 +196,7 @@ class VideoWriter:
         if a.dtype != np.uint8 or a.shape != (self.height, self.width, 3):
             raise ServoscopeError(
                 f"frame must be uint8 of shape {(self.height, self.width, 3)}, not {a.dtype} {a.shape}")
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(a), format="rgb24")
-        frame = frame.reformat(format="yuv420p")
+        frame = av.VideoFrame.from_ndarray(rgb_to_yuv420p(a), format="yuv420p")
         frame.pts = self.frames_written
         frame.time_base = self.time_base
         for packet in self._stream.encode(frame):

@@ -1,0 +1,122 @@
+"""The ``servoscope plan`` and ``servoscope drive`` commands.
+
+They are plain :class:`click.Command` objects; the main group registers them
+with ``cli.add_command(plan)`` and ``cli.add_command(drive)``. Bad input raises
+:class:`~servoscope.errors.ServoscopeError`, which the main entry point turns
+into ``servoscope: error: …`` and exit status 2.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .protocols import PROTOCOLS
+
+__all__ = ["plan", "drive"]
+
+
+@click.command("plan")
+@click.option("--fps", type=float, required=True, help="Camera frame rate, frames/s.")
+@click.option("--from", "from_hz", type=float, required=True, help="Lowest dwell frequency, Hz.")
+@click.option("--to", "to_hz", type=float, required=True, help="Highest dwell frequency, Hz.")
+@click.option("--points", default=14, show_default=True, type=int, help="Number of log-spaced frequencies.")
+@click.option("--amplitude", default=0.1, show_default=True, type=float, help="Sine amplitude, input units.")
+@click.option("--periods", default=8.0, show_default=True, type=float, help="Periods per dwell after settling.")
+@click.option("--min-seconds", default=3.0, show_default=True, type=float, help="Shortest input duration, s.")
+@click.option("--settle", "settle_s", default=1.0, show_default=True, type=float,
+              help="Settling time after the input starts, s (also [analysis] settle_s).")
+@click.option("--update-hz", default=50.0, show_default=True, type=float,
+              help="Command update rate: the servo's PWM rate, Hz.")
+@click.option("--step/--no-step", default=True, show_default=True, help="End with a step test.")
+@click.option("--step-amplitude", default=0.5, show_default=True, type=float, help="Step size, input units.")
+@click.option("--step-seconds", default=3.0, show_default=True, type=float, help="Step duration, s.")
+@click.option("--lead-in", "lead_in_s", default=1.0, show_default=True, type=float,
+              help="Servo centred, LED lit, camera rolling before the input starts, s.")
+@click.option("--tail", "tail_s", default=0.5, show_default=True, type=float,
+              help="Servo centred after the input before the camera stops, s.")
+@click.option("--rest", "rest_s", default=2.0, show_default=True, type=float, help="Wait between dwells, s.")
+@click.option("--lead", default="#d62728", show_default=True, help="Leading-edge marker colour.")
+@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour.")
+@click.option("--led", default="#ffd400", show_default=True, help="LED colour.")
+@click.option("--units", default="normalized", show_default=True, help="Label of the input's units.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.toml"),
+              show_default=True, help="Plan file to write.")
+def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float, periods: float,
+         min_seconds: float, settle_s: float, update_hz: float, step: bool, step_amplitude: float,
+         step_seconds: float, lead_in_s: float, tail_s: float, rest_s: float, lead: str, trail: str,
+         led: str, units: str, out: Path) -> None:
+    """Plan a log-spaced sine sweep and a step test; write a campaign.toml without videos."""
+    from ..markers.colour import parse_colour
+    from .plan import plan_sweep, write_plan
+
+    for option, colour in (("--lead", lead), ("--trail", trail), ("--led", led)):
+        parse_colour(colour, what=option)
+    sweep = plan_sweep(
+        fps, from_hz, to_hz, points=points, amplitude=amplitude, periods=periods, min_seconds=min_seconds,
+        settle_s=settle_s, update_hz=update_hz, step=step, step_amplitude=step_amplitude,
+        step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s,
+        markers={"lead": lead, "trail": trail, "led": led}, units=units,
+    )
+    write_plan(sweep, out)
+    for i, d in enumerate(sweep.dwells, start=1):
+        what = f"{d.frequency_hz:>8g} Hz" if d.kind == "sine" else "    step   "
+        click.echo(f"{i:3d} {what}  amplitude {d.amplitude:g}  {d.duration_s:7.2f} s")
+    for warning in sweep.warnings:
+        click.echo(f"warning: {warning}", err=True)
+    minutes = sweep.total_s / 60
+    click.echo(f"wrote {out}: {len(sweep.dwells)} tests, {minutes:.1f} min of driving plus camera handling")
+
+
+@click.command("drive")
+@click.argument("plan_file", metavar="PLAN", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--port", required=True, help="Serial port of the servo controller (/dev/ttyACM0, COM3).")
+@click.option("--protocol", type=click.Choice(sorted(PROTOCOLS)), default="maestro", show_default=True,
+              help="Controller protocol.")
+@click.option("--device-number", default=12, show_default=True, type=int,
+              help="Maestro device number (maestro-pololu protocol only).")
+@click.option("--baud", default=9600, show_default=True, type=int, help="Baud rate, bits/s.")
+@click.option("--channel", default=0, show_default=True, type=int, help="Servo channel.")
+@click.option("--led-channel", default=5, show_default=True, type=int, help="LED channel (a digital output).")
+@click.option("--no-led", is_flag=True, help="No LED on the rig.")
+@click.option("--led-active-low", is_flag=True, help="The LED lights when its output is low.")
+@click.option("--center-us", default=1500.0, show_default=True, type=float, help="Pulse width at input 0, µs.")
+@click.option("--us-per-unit", default=500.0, show_default=True, type=float, help="µs per input unit.")
+@click.option("--min-us", default=1000.0, show_default=True, type=float, help="Servo travel limit, µs.")
+@click.option("--max-us", default=2000.0, show_default=True, type=float, help="Servo travel limit, µs.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Completed campaign.toml [default: campaign.toml beside PLAN].")
+@click.option("--log", "log_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Command log CSV [default: drive_log.csv beside the campaign].")
+@click.option("--no-prompt", is_flag=True, help="Do not wait for Enter: the camera is started by other means.")
+@click.option("--wait", "wait_s", type=float, help="Instead of prompting, wait this long for the camera, s.")
+def drive(plan_file: Path, port: str, protocol: str, device_number: int, baud: int, channel: int,
+          led_channel: int, no_led: bool, led_active_low: bool, center_us: float, us_per_unit: float,
+          min_us: float, max_us: float, out: Path | None, log_path: Path | None, no_prompt: bool,
+          wait_s: float | None) -> None:
+    """Run PLAN on the rig: stream each test to the servo, switch the LED at the input start."""
+    from ..errors import ServoscopeError
+    from .driver import RigSettings, drive_plan, no_camera_prompt, prompt_camera, wait_camera
+    from .plan import read_plan
+    from .protocols import get_protocol
+
+    if wait_s is not None and (wait_s < 0 or no_prompt):
+        raise ServoscopeError("--wait must be ≥ 0 and cannot go with --no-prompt")
+    sweep = read_plan(plan_file)
+    out = out if out is not None else plan_file.with_name("campaign.toml")
+    camera = no_camera_prompt if no_prompt else wait_camera(wait_s) if wait_s is not None else prompt_camera
+    settings = RigSettings(
+        channel=channel, led_channel=None if no_led else led_channel, center_us=center_us,
+        us_per_unit=us_per_unit, min_us=min_us, max_us=max_us, led_active_low=led_active_low,
+    )
+    try:
+        result = drive_plan(
+            sweep, port, settings=settings, protocol=get_protocol(protocol, device_number=device_number),
+            camera=camera, campaign_path=out, log_path=log_path, baud=baud,
+            report=lambda line: click.echo(line, err=True),
+        )
+    except KeyboardInterrupt:
+        click.echo("stopped: servo back at centre, LED on; no campaign written", err=True)
+        raise
+    click.echo(f"wrote {result.campaign} and {result.log}; latest command {result.max_late_ms:.2f} ms behind schedule")

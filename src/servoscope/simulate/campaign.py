@@ -1,0 +1,239 @@
+"""Write a complete simulated campaign: videos, campaign.toml, camera.json, truth.json.
+
+The footage has a known answer: ``truth.json`` records the model, the
+camera, and for every frame the blade pitch, the true sticker centres (ideal,
+undistorted pixel coordinates) and the LED level.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+from collections.abc import Callable
+from dataclasses import fields, replace
+from fractions import Fraction
+from pathlib import Path
+
+import control
+import numpy as np
+
+from ..errors import ServoscopeError
+from ..video.writer import VideoWriter, container_suffixes
+from .presets import CampaignPreset, get_preset
+from .render import FrameRenderer
+from .scene import Scene, led_exposure_fraction, marker_angle_rad
+from .servo import InputSignal, ServoModel
+
+__all__ = ["simulate_campaign", "frame_times_s", "step_metrics", "render_test"]
+
+
+def frame_times_s(n_frames: int, fps: Fraction) -> np.ndarray:
+    """``i / fps`` for i < n_frames, each correctly rounded (one division)."""
+    fps = Fraction(fps)
+    return (np.arange(n_frames, dtype=np.float64) * fps.denominator) / fps.numerator
+
+
+def step_metrics(servo: ServoModel) -> dict[str, float | None]:
+    """Rise time (10–90 %), overshoot and 2 % settling time of G's step response.
+
+    Uses ``control.step_info`` on a fine time grid (dead time excluded); None
+    where undefined (unstable or integrating models).
+    """
+    g = servo.transfer_function
+    poles = np.roots(servo.den)
+    if poles.size and np.max(poles.real) >= 0:
+        return {"rise_time_s": None, "overshoot_pct": None, "settling_time_s": None}
+    slowest = np.min(np.abs(poles.real)) if poles.size else 1.0
+    t = np.linspace(0.0, 12.0 / slowest, 120_001)
+    info = control.step_info(g, t)
+
+    def clean(v: float) -> float | None:
+        return float(v) if v is not None and math.isfinite(v) else None
+
+    return {"rise_time_s": clean(info["RiseTime"]), "overshoot_pct": clean(info["Overshoot"]),
+            "settling_time_s": clean(info["SettlingTime"])}
+
+
+def _toml_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _toml_float(v: float) -> str:
+    r = repr(float(v))
+    return r if ("." in r or "e" in r) else r + ".0"
+
+
+def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputSignal, duration_s: float,
+                noise_seed: int) -> dict:
+    """Render and encode one test video; return its truth record (without the video name).
+
+    Parameters
+    ----------
+    path : Path
+        Output video file.
+    preset : CampaignPreset
+        Campaign settings (servo, video, camera).
+    scene : Scene
+        What is filmed.
+    signal : InputSignal
+        The test input (its t0_s also switches the LED off).
+    duration_s : float
+        Length of the video; frames at ``i / fps < duration_s``.
+    noise_seed : int
+        Seed of this video's sensor noise.
+    """
+    fps = Fraction(preset.fps).limit_denominator(1_000_000)
+    n = int(math.ceil(duration_s * fps))
+    time_s = frame_times_s(n, fps)
+    pitch = preset.servo.response(signal, time_s)
+    lead, trail = scene.sticker_centres_px(pitch)
+    angle = marker_angle_rad(lead, trail)
+    led = led_exposure_fraction(time_s, signal.t0_s, preset.exposure_s)
+    renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed)
+    with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
+                     preset=preset.x264_preset) as writer:
+        for i in range(n):
+            writer.write(renderer.render(float(pitch[i]), float(led[i]), i))
+    rec: dict = {"kind": signal.kind}
+    if signal.kind == "sine":
+        rec["frequency_hz"] = signal.frequency_hz
+    rec.update({
+        "amplitude": signal.amplitude,
+        "t0_s": signal.t0_s,
+        "time_s": time_s.tolist(),
+        "angle_rad": angle.tolist(),
+        "pitch_rad": pitch.tolist(),
+        "lead_xy_px": lead.tolist(),
+        "trail_xy_px": trail.tolist(),
+        "led_level": led.tolist(),
+    })
+    return rec
+
+
+def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, *,
+                      progress: Callable[[int, int, str], None] | None = None, **overrides) -> Path:
+    """Simulate a whole measurement campaign with a known answer.
+
+    Parameters
+    ----------
+    outdir : str or Path
+        Directory to write into (created if needed; our files are overwritten).
+    preset : str
+        Name of a preset in :data:`servoscope.simulate.PRESETS` ("paper", "quick").
+    seed : int
+        Seed of everything random: t0 phases, sensor noise, background.
+    progress : callable, optional
+        Called as ``progress(i, n, video_name)`` before test ``i`` of ``n``.
+    **overrides
+        Any :class:`~servoscope.simulate.presets.CampaignPreset` field, e.g.
+        ``width=360, height=288, fps=50, codec="raw", bit_rate=8_000_000,
+        noise_sigma_dn=0, frequencies_hz=(1.0, 2.0), servo=ServoModel(...)``.
+
+    Returns
+    -------
+    Path
+        The written ``campaign.toml``.
+
+    Raises
+    ------
+    ServoscopeError
+        Unknown preset or override, or invalid settings.
+    """
+    base = get_preset(preset)
+    allowed = {f.name for f in fields(CampaignPreset)} - {"name"}
+    unknown = set(overrides) - allowed
+    if unknown:
+        raise ServoscopeError(f"unknown simulation setting(s) {sorted(unknown)} (known: {', '.join(sorted(allowed))})")
+    if int(seed) != seed or seed < 0:
+        raise ServoscopeError(f"seed must be a non-negative integer, not {seed!r}")
+    seed = int(seed)
+    p = replace(base, **overrides)
+    suffix = container_suffixes(p.codec)[0]
+    fps = Fraction(p.fps).limit_denominator(1_000_000)
+    scene = p.scene if p.scene is not None else Scene.for_size(p.width, p.height, background_seed=seed)
+    camera = p.camera()
+
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    # (video name, kind, frequency) per test, in recording order.
+    plan: list[tuple[str, str, float | None]] = [
+        (f"dwell_{k + 1:02d}_{f:.2f}Hz{suffix}", "sine", f) for k, f in enumerate(p.frequencies_hz)]
+    if p.include_step:
+        plan.append((f"step{suffix}", "step", None))
+    streams = np.random.SeedSequence(seed).spawn(len(plan))
+
+    tests = []
+    for k, ((name, kind, freq), ss) in enumerate(zip(plan, streams)):
+        if progress is not None:
+            progress(k, len(plan), name)
+        rng = np.random.default_rng(ss)
+        # t0 falls a random fraction (away from the edges) into a frame
+        # interval: the LED's partial exposure then carries sub-frame timing.
+        frac = rng.uniform(0.1, 0.9)
+        t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
+        noise_seed = int(rng.integers(0, 2**63 - 1))
+        if kind == "sine":
+            signal = InputSignal("sine", p.sine_amplitude, freq, t0_s=t0)
+            duration = p.dwell_duration_s(freq, t0)
+        else:
+            signal = InputSignal("step", p.step_amplitude, t0_s=t0)
+            duration = t0 + p.step_after_t0_s
+        rec = render_test(out / name, p, scene, signal, duration, noise_seed)
+        tests.append({"video": name, **rec})
+
+    camera.save(out / "camera.json")
+    (out / "truth.json").write_text(json.dumps(_truth(p, seed, camera, fps, scene, tests), allow_nan=False) + "\n")
+    toml_path = out / "campaign.toml"
+    toml_path.write_text(_campaign_toml(p, scene, tests))
+    return toml_path
+
+
+def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, tests: list[dict]) -> dict:
+    s = p.servo
+    steps = step_metrics(s)
+    steps["dead_time_s"] = s.dead_time_s
+    return {
+        "preset": p.name,
+        "seed": seed,
+        "model": {
+            "num": list(s.num), "den": list(s.den), "gain": s.gain if math.isfinite(s.gain) else None,
+            "natural_frequency_rad_s": s.natural_frequency_rad_s, "damping_ratio": s.damping_ratio,
+            "dead_time_s": s.dead_time_s, "input_quantization": s.input_quantization,
+            "rate_limit_per_s": s.rate_limit_per_s, "backlash": s.backlash,
+        },
+        "bandwidth_rad_s": s.bandwidth_rad_s,
+        "step": steps,
+        "camera": camera.to_dict(),
+        "video": {
+            "codec": p.codec, "bit_rate": p.bit_rate if p.codec == "h264" else None, "fps": float(fps),
+            "fps_rational": [fps.numerator, fps.denominator], "exposure_s": p.exposure_s,
+            "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,
+        },
+        "sticker_offset_rad": scene.sticker_offset_rad,
+        "input_units": p.input_units,
+        "tests": tests,
+    }
+
+
+def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
+    lines = [
+        "# Simulated campaign written by servoscope.simulate (the true answer is in truth.json).",
+        "[camera]",
+        f"calibration = {_toml_str('camera.json')}",
+        "",
+        "[markers]",
+        f"lead = {_toml_str(scene.lead_colour)}",
+        f"trail = {_toml_str(scene.trail_colour)}",
+        f"led = {_toml_str(scene.led_colour)}",
+        "",
+        "[input]",
+        f"units = {_toml_str(p.input_units)}",
+    ]
+    for t in tests:
+        lines += ["", "[[tests]]", f"video = {_toml_str(t['video'])}", f"kind = {_toml_str(t['kind'])}"]
+        if t["kind"] == "sine":
+            lines.append(f"frequency_hz = {_toml_float(t['frequency_hz'])}")
+        lines.append(f"amplitude = {_toml_float(t['amplitude'])}")
+    return "\n".join(lines) + "\n"
