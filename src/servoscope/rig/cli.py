@@ -91,10 +91,12 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
               help="Command log CSV [default: drive_log.csv beside the campaign].")
 @click.option("--no-prompt", is_flag=True, help="Do not wait for Enter: the camera is started by other means.")
 @click.option("--wait", "wait_s", type=float, help="Instead of prompting, wait this long for the camera, s.")
+@click.option("--no-realtime", is_flag=True,
+              help="Do not ask for real-time scheduling while streaming (asked for by default where allowed).")
 def drive(plan_file: Path, port: str, protocol: str, device_number: int, baud: int, channel: int,
           led_channel: int, no_led: bool, led_active_low: bool, center_us: float, us_per_unit: float,
           min_us: float, max_us: float, out: Path | None, log_path: Path | None, no_prompt: bool,
-          wait_s: float | None) -> None:
+          wait_s: float | None, no_realtime: bool) -> None:
     """Run PLAN on the rig: stream each test to the servo, switch the LED at the input start."""
     from ..errors import ServoscopeError
     from .driver import RigSettings, drive_plan, no_camera_prompt, prompt_camera, wait_camera
@@ -114,7 +116,7 @@ def drive(plan_file: Path, port: str, protocol: str, device_number: int, baud: i
         result = drive_plan(
             sweep, port, settings=settings, protocol=get_protocol(protocol, device_number=device_number),
             camera=camera, campaign_path=out, log_path=log_path, baud=baud,
-            report=lambda line: click.echo(line, err=True),
+            report=lambda line: click.echo(line, err=True), realtime=not no_realtime,
         )
     except KeyboardInterrupt:
         click.echo("stopped: servo back at centre, LED on; no campaign written", err=True)

@@ -265,6 +265,7 @@ class _Rig:
         self.link, self.protocol, self.settings, self.log = link, protocol, settings, log
         self.dwell = "setup"
         self.t0_s: float | None = None  # perf_counter time of the current dwell's t0, once reached
+        self.realtime = True  # ask for real-time priority while streaming (best effort)
 
     def servo_bytes(self, target_qus: int) -> bytes:
         return self.protocol.set_target(self.settings.channel, target_qus)
@@ -299,6 +300,40 @@ def _sleep_until(deadline_s: float) -> None:
         time.sleep(remaining_s)
 
 
+class _RealtimePriority:
+    """Best-effort real-time scheduling (Linux SCHED_FIFO) of the calling thread, restored on exit.
+
+    Under CPU load an ordinary thread can be preempted for several ms, which
+    shows up as late commands; a low real-time priority avoids that. The loop
+    sleeps between commands, so it cannot starve the machine. Without the
+    privilege (CAP_SYS_NICE or an rtprio limit) nothing changes.
+    """
+
+    PRIORITY = 10  # low among real-time priorities (1…99): above every ordinary process, below the kernel's
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and hasattr(os, "sched_setscheduler")
+        self.active = False
+
+    def __enter__(self) -> "_RealtimePriority":
+        if self.enabled:
+            try:
+                self._old = (os.sched_getscheduler(0), os.sched_getparam(0))
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.PRIORITY))
+                self.active = True
+            except (OSError, AttributeError):
+                self.active = False
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.active:
+            try:
+                os.sched_setscheduler(0, self._old[0], self._old[1])
+            except OSError:
+                pass
+            self.active = False
+
+
 def _run_input(rig: _Rig, dwell: Dwell, update_hz: float) -> tuple[float, float]:
     """Stream one dwell's input from t0 until it is back at centre.
 
@@ -325,23 +360,24 @@ def _run_input(rig: _Rig, dwell: Dwell, update_hz: float) -> tuple[float, float]
     gc_was_enabled = gc.isenabled()
     gc.disable()  # a collection mid-dwell is a multi-ms hiccup in the schedule
     try:
-        t0_s = rig.send(first)  # LED off and the first input command: the same instant
-        rig.t0_s = t0_s
-        max_late_s = 0.0
-        k = 1
-        while k <= n_updates:
-            deadline_s = t0_s + k / update_hz
-            _sleep_until(deadline_s)
-            late_s = time.perf_counter() - deadline_s
-            if late_s >= 1.0 / update_hz:
-                # More than a period behind (the machine stalled): send what is due
-                # now rather than a burst of stale commands; the schedule stays absolute.
-                k = min(n_updates, k + int(late_s * update_hz))
+        with _RealtimePriority(rig.realtime):
+            t0_s = rig.send(first)  # LED off and the first input command: the same instant
+            rig.t0_s = t0_s
+            max_late_s = 0.0
+            k = 1
+            while k <= n_updates:
                 deadline_s = t0_s + k / update_hz
+                _sleep_until(deadline_s)
                 late_s = time.perf_counter() - deadline_s
-            rig.send([(settings.channel, targets[k], frames[k])])
-            max_late_s = max(max_late_s, late_s)
-            k += 1
+                if late_s >= 1.0 / update_hz:
+                    # More than a period behind (the machine stalled): send what is due
+                    # now rather than a burst of stale commands; the schedule stays absolute.
+                    k = min(n_updates, k + int(late_s * update_hz))
+                    deadline_s = t0_s + k / update_hz
+                    late_s = time.perf_counter() - deadline_s
+                rig.send([(settings.channel, targets[k], frames[k])])
+                max_late_s = max(max_late_s, late_s)
+                k += 1
     finally:
         if gc_was_enabled:
             gc.enable()
@@ -359,6 +395,7 @@ def drive_plan(
     log_path: str | Path | None = None,
     baud: int = 9600,
     report: Callable[[str], None] | None = None,
+    realtime: bool = True,
 ) -> DriveResult:
     """Run a plan on the rig and write the completed campaign.
 
@@ -384,6 +421,9 @@ def drive_plan(
         Baud rate, bits/s.
     report : callable, optional
         Called with one line of progress per test.
+    realtime : bool
+        While streaming, ask for real-time scheduling (Linux SCHED_FIFO,
+        priority 10) if the process may; without the privilege nothing changes.
 
     Returns
     -------
@@ -414,6 +454,7 @@ def drive_plan(
         link.close()
         raise
     rig = _Rig(link, protocol, settings, log)
+    rig.realtime = realtime
     start_s = time.perf_counter()
     origin_s = start_s  # time origin of the rows not yet written
     late_ms: list[float] = []

@@ -45,7 +45,7 @@ def step_metrics(servo: ServoModel) -> dict[str, float | None]:
     if poles.size and np.max(poles.real) >= 0:
         return {"rise_time_s": None, "overshoot_pct": None, "settling_time_s": None}
     slowest = np.min(np.abs(poles.real)) if poles.size else 1.0
-    t = np.linspace(0.0, 12.0 / slowest, 120_001)
+    t = np.linspace(0.0, 12.0 / slowest, 20_001)
     info = control.step_info(g, t)
 
     def clean(v: float) -> float | None:
@@ -169,9 +169,12 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         if progress is not None:
             progress(k, len(plan), name)
         rng = np.random.default_rng(ss)
-        # t0 falls a random fraction (away from the edges) into a frame
-        # interval: the LED's partial exposure then carries sub-frame timing.
-        frac = rng.uniform(0.1, 0.9)
+        # t0 falls a random fraction into a frame interval, as for a camera
+        # that is not synchronised with the input (kept off the exact frame
+        # times). When the switch falls inside an exposure the partly lit LED
+        # frame dates it; when it falls between exposures it is only known
+        # to within the gap, 1/fps - exposure_s.
+        frac = rng.uniform(0.02, 0.98)
         t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
         noise_seed = int(rng.integers(0, 2**63 - 1))
         if kind == "sine":
@@ -222,6 +225,9 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
         "# Simulated campaign written by servoscope.simulate (the true answer is in truth.json).",
         "[camera]",
         f"calibration = {_toml_str('camera.json')}",
+        # The shutter time is a camera setting the operator knows; the LED's
+        # partly lit frame gives the input's start only if it is known.
+        *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 else []),
         "",
         "[markers]",
         f"lead = {_toml_str(scene.lead_colour)}",

@@ -16,11 +16,12 @@ polygons and its anti-aliasing is not area-exact, so the centroid of a drawn
 disk wanders by ~0.07 px with the sub-pixel position — larger than the
 effects servoscope must measure.
 
-Sensor noise uses a counter-free splitmix64 stream seeded per frame from a
-numpy ``SeedSequence`` and an inverse-CDF table of 65536 Gaussian quantiles:
-numpy's ``standard_normal`` on 1.2 M samples per frame would by itself eat
-most of the 10 ms budget per frame. The table truncates the Gaussian at about
-±4.3 sigma, irrelevant after rounding to 8 bits.
+Sensor noise uses a splitmix64 stream (in numba) whose state is drawn per
+frame from a numpy ``SeedSequence([noise_seed, frame_index])``, mapped through
+an inverse-CDF table of 65536 Gaussian quantiles: numpy's
+``standard_normal`` plus rounding on 1.2 M samples per frame would by itself
+eat most of the 10 ms budget per frame. The table truncates the Gaussian at
+about ±4.3 sigma, irrelevant after rounding to 8 bits.
 """
 
 from __future__ import annotations
