@@ -136,15 +136,23 @@ def test_maestro_bytes_match_the_users_guide():
         get_protocol("pwm-board")
 
 
-def test_sine_dwell_targets_timing_and_led(maestro, tmp_path, capsys):
-    """A 2 s, 2 Hz dwell: every target, its arrival time, and the LED switch at t0."""
+def _drive_one_sine_dwell(workdir: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """Drive a 2 s, 2 Hz dwell into a fresh fake Maestro and check every byte.
+
+    Returns the fake's arrival − schedule errors (ms), the driver's logged
+    send − schedule errors (ms), and the driver's own max lateness (ms).
+    """
+    workdir.mkdir()
+    maestro = FakeMaestro()
     dwell = Dwell("sine", 0.3, 2.0, 2.0)
     settings = RigSettings(channel=SERVO, led_channel=LED, center_us=1500, us_per_unit=500)
     events = []
-    result = drive_plan(one_dwell_plan(dwell), maestro.port, settings=settings,
-                        camera=lambda e, i, d, v: events.append((e, i, v)),
-                        campaign_path=tmp_path / "campaign.toml")
-    maestro.stop()
+    try:
+        result = drive_plan(one_dwell_plan(dwell), maestro.port, settings=settings,
+                            camera=lambda e, i, d, v: events.append((e, i, v)),
+                            campaign_path=workdir / "campaign.toml")
+    finally:
+        maestro.stop()
     assert maestro.errors == []
     assert events == [("start", 1, "dwell_01_2.00Hz.mp4"), ("stop", 1, "dwell_01_2.00Hz.mp4")]
     cmds = maestro.commands
@@ -174,14 +182,7 @@ def test_sine_dwell_targets_timing_and_led(maestro, tmp_path, capsys):
     got_qus = np.array([c.value for c in servo])
     assert np.max(np.abs(got_qus - planned_qus)) <= 0.5 + 1e-9, "targets within rounding of the planned sine"
     assert got_qus.max() >= 6590 and got_qus.min() <= 5410  # the full ±150 µs swing (±600 quarter-µs) got through
-
-    error_ms = (np.array([c.time_s for c in servo]) - (t0_s + k / UPDATE_HZ)) * 1e3
-    with capsys.disabled():
-        print(f"\nfake Maestro over 2 s at 50 Hz: arrival − schedule: max |e| = {np.max(np.abs(error_ms)):.3f} ms, "
-              f"(update {np.argmax(np.abs(error_ms))}), rms = {np.sqrt(np.mean(error_ms ** 2)):.3f} ms, "
-              f"mean = {error_ms.mean():.3f} ms; "
-              f"driver's own max lateness {result.max_late_ms:.3f} ms")
-    assert np.max(np.abs(error_ms)) < 2.0
+    arrival_ms = (np.array([c.time_s for c in servo]) - (t0_s + k / UPDATE_HZ)) * 1e3
 
     # The log has the same commands, times relative to t0.
     with result.log.open() as fh:
@@ -191,8 +192,7 @@ def test_sine_dwell_targets_timing_and_led(maestro, tmp_path, capsys):
     assert float(off_row["time_s"]) == 0.0 and off_row["command"] == "84 05 00 00"
     input_rows = [r for r in rows if r["channel"] == str(SERVO) and r["target_qus"] and float(r["time_s"]) >= 0]
     assert [int(r["target_qus"]) for r in input_rows] == list(got_qus) + [CENTRE_QUS]
-    log_ms = np.array([float(r["time_s"]) for r in input_rows[: n + 1]]) * 1e3 - k * 1e3 / UPDATE_HZ
-    assert np.max(np.abs(log_ms)) < 2.0
+    sent_ms = np.array([float(r["time_s"]) for r in input_rows[: n + 1]]) * 1e3 - k * 1e3 / UPDATE_HZ
 
     # The completed campaign: one video per test, [plan] kept, readable by the manifest loader without it.
     data = tomllib.loads(result.campaign.read_text())
@@ -200,10 +200,33 @@ def test_sine_dwell_targets_timing_and_led(maestro, tmp_path, capsys):
     assert data["plan"]["drive"]["log"] == "drive_log.csv" and data["plan"]["dwells"][0]["max_late_ms"] >= 0
     from servoscope.campaign.manifest import load_campaign
 
-    bare = tmp_path / "bare.toml"
+    bare = workdir / "bare.toml"
     bare.write_text(plan_to_toml(result.plan, include_plan=False))
     campaign = load_campaign(bare, check_videos=False)
     assert campaign.tests[0].frequency_hz == 2.0 and campaign.tests[0].video.name == "dwell_01_2.00Hz.mp4"
+    return arrival_ms, sent_ms, result.max_late_ms
+
+
+def test_sine_dwell_targets_timing_and_led(tmp_path, capsys):
+    """A 2 s, 2 Hz dwell: every target, its arrival time within 2 ms of schedule, the LED switch at t0.
+
+    The fake's arrival stamps include the pty's delivery, which the kernel does
+    in a work queue at ordinary priority; when the machine is saturated that
+    alone can be late by a few ms. So a late arrival is measured once more —
+    only if the driver's own logged send times were on schedule: a driver that
+    drifts or sends late fails on the first attempt.
+    """
+    for attempt in (1, 2):
+        arrival_ms, sent_ms, max_late_ms = _drive_one_sine_dwell(tmp_path / f"attempt{attempt}")
+        with capsys.disabled():
+            print(f"\nfake Maestro, 2 s at 50 Hz (attempt {attempt}): arrival − schedule: "
+                  f"max |e| = {np.max(np.abs(arrival_ms)):.3f} ms (update {np.argmax(np.abs(arrival_ms))}), "
+                  f"rms = {np.sqrt(np.mean(arrival_ms ** 2)):.3f} ms; driver send − schedule: "
+                  f"max |e| = {np.max(np.abs(sent_ms)):.3f} ms, max lateness {max_late_ms:.3f} ms")
+        assert np.max(np.abs(sent_ms)) < 2.0, "the driver's sends are off schedule"
+        if np.max(np.abs(arrival_ms)) < 2.0:
+            break
+    assert np.max(np.abs(arrival_ms)) < 2.0
 
 
 def test_step_with_active_low_led_and_scaled_units(maestro, tmp_path):

@@ -256,3 +256,22 @@ def test_stderr_scaled_by_residual_variance():
     assert b.natural_frequency_rad_s == pytest.approx(a.natural_frequency_rad_s, rel=1e-8)
     assert b.damping_ratio_stderr == pytest.approx(a.damping_ratio_stderr, rel=1e-6)
     assert b.gain_stderr == pytest.approx(a.gain_stderr, rel=1e-6)
+
+
+def test_exposure_correction_restores_box_filtered_gains():
+    """Averaging a sine over an exposure e scales it by sinc(f·e): measured by simulation."""
+    from servoscope.sysid import FrequencyResponse, fit_sine
+
+    e, fps = 0.01, 100.0
+    t = np.arange(0.0, 4.0, 1 / fps)
+    fits, freqs = [], [0.5, 3.0, 9.0, 15.0]
+    offsets = ((np.arange(64) + 0.5) / 64 - 0.5) * e
+    for f in freqs:
+        # What a sensor records: the sine integrated over each exposure window.
+        y = np.sin(2 * np.pi * f * (t[:, None] + offsets)).mean(axis=1) * 0.02
+        fits.append(fit_sine(t, y, f, t0_s=0.0, settle_s=0.0))
+    raw = FrequencyResponse.from_sine_fits(fits, 1.0)
+    fixed = raw.corrected_for_exposure(e)
+    assert raw.gain[-1] < 0.97 * 0.02  # the loss is real: 3.7 % at 15 Hz
+    np.testing.assert_allclose(fixed.gain, 0.02, rtol=1e-4)
+    np.testing.assert_allclose(fixed.phase_deg, raw.phase_deg)

@@ -272,6 +272,8 @@ def identify(
             f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
         )
     fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
+    if campaign.exposure_s is not None:
+        fr = fr.corrected_for_exposure(campaign.exposure_s)
     if fit not in ("auto", "magnitude", "complex"):
         raise ServoscopeError(f"fit: unknown mode {fit!r} (use auto, magnitude or complex)")
     phases_known = bool(np.all(np.isfinite(fr.phase_deg)))

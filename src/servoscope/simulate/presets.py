@@ -50,8 +50,11 @@ class CampaignPreset:
         x264 speed preset.
     noise_sigma_dn : float
         Sensor noise, DN.
-    exposure_s : float
-        Exposure time, seconds.
+    exposure_s : float or None
+        Exposure time, seconds; None (the default) = one frame interval, a
+        camcorder's 1/100 s shutter at 100 frames/s. The LED's partial
+        exposure dates the input start to a fraction of a frame only when the
+        switch falls inside an exposure; the blade's pose is averaged over it.
     pre_roll_s : float
         Time with the LED lit before the input starts (t0 is this plus a
         seeded fraction of a frame, so it never falls on a frame boundary).
@@ -86,7 +89,7 @@ class CampaignPreset:
     bit_rate: int = 20_000_000
     x264_preset: str = "ultrafast"
     noise_sigma_dn: float = 1.5
-    exposure_s: float = 1.0 / 250.0
+    exposure_s: float | None = None
     pre_roll_s: float = 0.5
     settle_s: float = 0.5
     min_dwell_s: float = 3.0
@@ -102,6 +105,8 @@ class CampaignPreset:
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):
             raise ServoscopeError("frequencies_hz must be positive")
         object.__setattr__(self, "frequencies_hz", freqs)
+        if self.exposure_s is None:
+            object.__setattr__(self, "exposure_s", 1.0 / float(Fraction(self.fps).limit_denominator(1_000_000)))
         if not freqs and not self.include_step:
             raise ServoscopeError("a campaign needs at least one test")
         if not (self.noise_sigma_dn >= 0 and self.exposure_s >= 0 and self.pre_roll_s >= 0 and self.settle_s >= 0):

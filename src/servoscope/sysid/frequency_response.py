@@ -208,6 +208,45 @@ class FrequencyResponse:
         return bool(np.any(np.isfinite(self.phase_deg)))
 
     # ---------------------------------------------------------------- exports
+    def corrected_for_exposure(self, exposure_s: float) -> "FrequencyResponse":
+        """Undo the camera's averaging of the motion over each exposure.
+
+        A frame integrates the output over its exposure window
+        [t − e/2, t + e/2]; for a sine that is a box filter whose gain is
+        sinc(f·e) = sin(πfe)/(πfe) and whose phase is zero about the window's
+        centre (the frame's timestamp). The measured gains and their standard
+        errors are divided by it; phases are unchanged.
+
+        Parameters
+        ----------
+        exposure_s : float
+            Exposure time e, seconds (≥ 0, below 1/f of every point).
+
+        Raises
+        ------
+        ServoscopeError
+            When e is negative or the box filter has a zero within the band
+            (f·e ≥ 1), where nothing can be recovered.
+        """
+        e = float(exposure_s)
+        if not (math.isfinite(e) and e >= 0):
+            raise ServoscopeError(f"exposure_s must be a finite number ≥ 0, got {exposure_s!r}")
+        factor = np.sinc(self.frequency_hz * e)
+        if np.any(self.frequency_hz * e >= 1.0):
+            raise ServoscopeError(
+                f"exposure {e:g} s spans a whole period at {self.frequency_hz.max():g} Hz: the motion averages out"
+            )
+        return FrequencyResponse(
+            frequency_hz=self.frequency_hz,
+            gain=self.gain / factor,
+            gain_stderr=self.gain_stderr / factor,
+            phase_deg=self.phase_deg,
+            phase_stderr_deg=self.phase_stderr_deg,
+            fidelity=self.fidelity,
+            labels=self.labels,
+            frequency_stderr_hz=self.frequency_stderr_hz,
+        )
+
     def _rows(self) -> list[dict[str, Any]]:
         cols = {
             "frequency_hz": self.frequency_hz,
