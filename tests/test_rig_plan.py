@@ -63,6 +63,9 @@ def test_the_paper_sweep_has_no_warnings_and_bad_frequencies_do():
     # Servo: above half the update rate, folded to 24 Hz.
     w = frequency_warnings(26, fps=200, update_hz=50)
     assert any("half the servo update rate" in x and "24 Hz" in x for x in w)
+    # Servo: exactly half the update rate, a sine started at 0 is sampled at its zeros.
+    w = frequency_warnings(25, fps=1000, update_hz=50)
+    assert any("zero crossing" in x for x in w)
     # Servo: on the update rate itself folds to 0.
     w = frequency_warnings(50, fps=1000, update_hz=50)
     assert any("alias at 0 Hz" in x for x in w)

@@ -247,6 +247,16 @@ def calibrate(inputs: tuple[Path, ...], board: str, square_size: float, out_json
         click.echo(f"skipped {name}: {reason}", err=True)
 
 
+def _register_rig() -> None:
+    from .rig.cli import drive, plan
+
+    cli.add_command(plan)
+    cli.add_command(drive)
+
+
+_register_rig()
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point: runs the command and maps errors to exit codes."""
     try:

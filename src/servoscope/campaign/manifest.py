@@ -20,7 +20,8 @@ from ..markers.colour import parse_colour
 
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
-_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis"}
+# [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
+_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan"}
 _CAMERA_KEYS = {"calibration", "exposure_s"}
 _MARKER_KEYS = {"lead", "trail", "led"}
 _INPUT_KEYS = {"units"}

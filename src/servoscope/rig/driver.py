@@ -487,7 +487,7 @@ def drive_plan(
             rig.dwell = "stop"
             rig.send(rig.rest_items())
             link.flush()
-        except Exception:
+        except BaseException:  # a failing port, or a second Ctrl-C: still close, then raise the first
             pass
         _close(link, log, origin_s)
         if _is_serial_error(exc):

@@ -228,7 +228,9 @@ def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analys
     elif fps / f < MIN_FRAMES_PER_PERIOD:
         out.append(f"{tag}: only {fps / f:.1f} frames per period at {fps:g} fps (fewer than {MIN_FRAMES_PER_PERIOD:g})")
     # Servo command stream: a staircase sampled at update_hz.
-    if f >= update_hz / 2:
+    if math.isclose(f, update_hz / 2):
+        out.append(f"{tag}: exactly half the servo update rate; every command sample of the sine falls on a zero crossing")
+    elif f > update_hz / 2:
         out.append(
             f"{tag}: at or above half the servo update rate ({update_hz / 2:g} Hz); "
             f"the servo receives its alias at {fold_hz(f, update_hz):.3g} Hz"
