@@ -19,7 +19,7 @@ CASES = {
     "not_toml": ("this is = = not toml", "not valid TOML"),
     "missing_video": (GOOD.replace('video = "a.mp4"\nkind = "sine"', 'video = "gone.mp4"\nkind = "sine"'), "gone.mp4: video not found"),
     "unknown_kind": (GOOD.replace('kind = "sine"', 'kind = "ramp"'), "unknown kind 'ramp'"),
-    "zero_frequency": (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 0"), "frequency_hz must be > 0"),
+    "zero_frequency": (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 0"), "tests[1].frequency_hz: must be > 0"),
 }
 
 
@@ -27,6 +27,7 @@ CASES = {
 def test_identify_bad_manifest(tmp_path, case):
     text, expected = CASES[case]
     _tiny_video(tmp_path / "a.mp4")
+    _tiny_video(tmp_path / "b.mp4")
     manifest = tmp_path / "campaign.toml"
     manifest.write_text(text)
     out = tmp_path / "out"
@@ -40,6 +41,7 @@ def test_identify_bad_manifest(tmp_path, case):
 
 
 def test_identify_video_that_is_not_a_video(tmp_path):
+    _tiny_video(tmp_path / "b.mp4")
     (tmp_path / "a.mp4").write_bytes(b"PK\x03\x04 this is a zip file, not a video" * 10)
     manifest = tmp_path / "campaign.toml"
     manifest.write_text(GOOD)
@@ -61,3 +63,35 @@ def test_usage_error_is_one_line(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith("servoscope: error: ") and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_keep_going_leaves_a_broken_video_out(tmp_path, quick_campaign):
+    """One broken video out of five: --keep-going identifies from the rest and says so."""
+    import json
+    import shutil
+
+    folder = tmp_path / "campaign"
+    shutil.copytree(quick_campaign.parent, folder)
+    broken = sorted(folder.glob("dwell_02_*.mp4"))[0]
+    broken.write_bytes(broken.read_bytes()[:2000])  # cut short before the first frame
+    manifest = folder / "campaign.toml"
+    strict = run_cli("identify", manifest, "--out", tmp_path / "strict")
+    assert strict.returncode == 2 and broken.name in strict.stderr and not (tmp_path / "strict").exists()
+    proc = run_cli("identify", manifest, "--out", tmp_path / "out", "--keep-going", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert [s["label"] for s in result["skipped"]] == [broken.stem]
+    assert any(broken.stem in w for w in result["warnings"])
+    assert len(result["frequency_response"]) == 3
+    assert broken.stem in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_out_cannot_overwrite_inputs(tmp_path):
+    _tiny_video(tmp_path / "a.mp4")
+    _tiny_video(tmp_path / "b.mp4")
+    (tmp_path / "campaign.toml").write_text(GOOD.replace('video = "b.mp4"', 'video = "result.json"'))
+    (tmp_path / "result.json").write_bytes((tmp_path / "b.mp4").read_bytes())
+    before = (tmp_path / "result.json").read_bytes()
+    proc = run_cli("identify", tmp_path / "campaign.toml", "--out", tmp_path)
+    assert proc.returncode == 2 and "would overwrite an input" in proc.stderr
+    assert (tmp_path / "result.json").read_bytes() == before

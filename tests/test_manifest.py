@@ -2,6 +2,8 @@
 
 from pathlib import Path
 
+import re
+
 import av
 import numpy as np
 import pytest
@@ -34,7 +36,7 @@ kind = "sine"
 frequency_hz = 1.0
 amplitude = 0.1
 [[tests]]
-video = "a.mp4"
+video = "b.mp4"
 label = "stepper"
 kind = "step"
 amplitude = 0.5
@@ -44,6 +46,7 @@ amplitude = 0.5
 @pytest.fixture
 def folder(tmp_path):
     _tiny_video(tmp_path / "a.mp4")
+    _tiny_video(tmp_path / "b.mp4")
     return tmp_path
 
 
@@ -67,21 +70,33 @@ def test_good_manifest(folder):
     [
         ("this is [not toml", "not valid TOML"),
         (GOOD.replace('kind = "sine"', 'kind = "chirp"'), "unknown kind 'chirp'"),
-        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 0.0"), "frequency_hz must be > 0"),
-        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = -3"), "frequency_hz must be > 0"),
+        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 0.0"), "tests[1].frequency_hz: must be > 0"),
+        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = -3"), "tests[1].frequency_hz: must be > 0, got -3"),
         (GOOD.replace("frequency_hz = 1.0", 'frequency_hz = "fast"'), "must be a finite number"),
-        (GOOD.replace("frequency_hz = 1.0\n", ""), "needs frequency_hz"),
+        (GOOD.replace("frequency_hz = 1.0\n", ""), "tests[1].frequency_hz: missing"),
         (GOOD.replace('video = "a.mp4"\nkind = "sine"', 'video = "missing.mp4"\nkind = "sine"'), "missing.mp4: video not found"),
         (GOOD.replace('lead = "#d62728"', 'lead = "#zz0000"'), "is not a colour"),
-        (GOOD.replace('lead = "#d62728"\n', ""), "needs lead"),
-        (GOOD.replace("amplitude = 0.1", "amplitud = 0.1"), "did you mean 'amplitude'"),
+        (GOOD.replace('lead = "#d62728"\n', ""), "markers.lead: missing"),
+        (GOOD.replace('video = "b.mp4"', 'video = "a.mp4"'), "tests[2].video: 'a.mp4' is also the video of tests[1]"),
+        (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 20.0"), "tests[1].frequency_hz: 20 Hz is at or above half the video's frame rate"),
+        (GOOD.replace("amplitude = 0.1", "amplitud = 0.1"), "tests[1].amplitud: unknown key (did you mean 'amplitude'?)"),
         ("[markers]\nlead='red'\ntrail='blue'\n", "no [[tests]]"),
         (GOOD.replace('[markers]', '[camera]\ncalibration = "nope.json"\n[markers]'), "calibration file not found"),
     ],
 )
 def test_bad_manifests(folder, text, expected):
-    with pytest.raises(ServoscopeError, match=expected.replace("[", r"\[").replace("(", r"\(")):
+    with pytest.raises(ServoscopeError, match=re.escape(expected)):
         load_campaign(_write(folder, text))
+
+
+def test_every_problem_reported_at_once(folder):
+    text = GOOD.replace('kind = "sine"', 'kind = "ramp"').replace("amplitude = 0.5", "amplitude = 0").replace('lead = "#d62728"', 'lead = "#12"')
+    with pytest.raises(ServoscopeError) as info:
+        load_campaign(_write(folder, text))
+    message = str(info.value)
+    assert "3 problems" in message and "\n" not in message
+    for part in ("markers.lead: '#12' is not a colour", "tests[1].kind: unknown kind 'ramp'", "tests[2].amplitude: must not be 0"):
+        assert part in message
 
 
 def test_not_a_video(folder):

@@ -146,22 +146,36 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder for result.json, report.html, tracks/.")
 @click.option("--fit", "fit_mode", type=click.Choice(["auto", "magnitude", "complex"]), default="auto", show_default=True,
               help="magnitude: |G| only (the paper's); complex: magnitude and phase with a dead time; auto: complex when every dwell's input start is known.")
+@click.option("--keep-going", is_flag=True, help="Leave out videos that cannot be read or tracked (with a warning) and identify from the rest.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
-def identify(campaign: Path, out_dir: Path, fit_mode: str, quiet: bool, as_json: bool) -> None:
+def identify(campaign: Path, out_dir: Path, fit_mode: str, keep_going: bool, quiet: bool, as_json: bool) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign
 
-    manifest = load_campaign(campaign)  # validates everything before --out is touched
+    manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
+    _check_out_dir(out_dir, manifest)
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
-        result = run_identify(manifest, fit=fit_mode, progress=progress)
+        result = run_identify(manifest, fit=fit_mode, keep_going=keep_going, progress=progress)
     paths = result.write(out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     elif not quiet:
         _print_model(result)
         click.echo(f"report: {paths['report']}")
+
+
+def _check_out_dir(out_dir: Path, manifest) -> None:
+    """Refuse an --out whose outputs would overwrite an input."""
+    inputs = {t.video.resolve() for t in manifest.tests} | {manifest.path.resolve()}
+    out = out_dir.resolve()
+    names = ["result.json", "report.html", "frequency_response.csv"] + [f"tracks/{t.label}.csv" for t in manifest.tests]
+    for name in names:
+        if (out / name).resolve() in inputs:
+            raise ServoscopeError(f"--out {out_dir}: writing {name} there would overwrite an input; choose another folder")
+    if out.exists() and not out.is_dir():
+        raise ServoscopeError(f"--out {out_dir}: exists and is not a folder")
 
 
 def _print_model(result, truth: dict | None = None) -> None:

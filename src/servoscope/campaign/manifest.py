@@ -1,8 +1,10 @@
 """The campaign manifest (``campaign.toml``): schema and validation.
 
 Validation happens before anything is written: a manifest that fails leaves
-the output folder untouched. Unknown keys are refused (with the nearest known
-key suggested), since a typo in a hand-typed manifest would otherwise be
+the output folder untouched. Every problem in the file is reported at once,
+each with its location (``campaign.toml: tests[3].frequency_hz: must be > 0``),
+so that a hand-typed manifest is fixed in one pass. Unknown keys are refused
+with the nearest known key suggested, since a typo would otherwise be
 silently ignored.
 """
 
@@ -76,6 +78,8 @@ class Campaign:
     settle_s : float
         Time skipped after the input starts before a dwell's steady state (s).
     tests : tuple of TestSpec
+    skipped : tuple of (label, reason)
+        Tests left out because their video could not be read (``keep_going``).
     """
 
     path: Path
@@ -87,6 +91,7 @@ class Campaign:
     input_units: str
     settle_s: float
     tests: tuple[TestSpec, ...] = field(default_factory=tuple)
+    skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -97,49 +102,83 @@ class Campaign:
         return [t for t in self.tests if t.kind == "step"]
 
     @classmethod
-    def load(cls, path: str | Path, *, check_videos: bool = True) -> "Campaign":
+    def load(cls, path: str | Path, *, check_videos: bool = True, keep_going: bool = False) -> "Campaign":
         """Read and validate a manifest; see :func:`load_campaign`."""
-        return load_campaign(path, check_videos=check_videos)
+        return load_campaign(path, check_videos=check_videos, keep_going=keep_going)
+
+    def without(self, reasons: dict[str, str]) -> "Campaign":
+        """The same campaign less some tests, each with the reason it was left out."""
+        return Campaign(
+            self.path, self.lead, self.trail, self.led, self.camera, self.exposure_s,
+            self.input_units, self.settle_s, tuple(t for t in self.tests if t.label not in reasons),
+            self.skipped + tuple(reasons.items()),
+        )
 
 
-def _unknown(path: Path, where: str, keys, allowed: set[str]) -> None:
-    for key in keys:
-        if key not in allowed:
-            near = difflib.get_close_matches(key, sorted(allowed), n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else f" (known: {', '.join(sorted(allowed))})"
-            raise ServoscopeError(f"{path}: unknown key {key!r} in {where}{hint}")
+class _Problems:
+    """Collects every problem of a manifest, each with its location."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.items: list[str] = []
+
+    def add(self, where: str, message: str) -> None:
+        self.items.append(f"{where}: {message}" if where else message)
+
+    def raise_if_any(self) -> None:
+        if not self.items:
+            return
+        if len(self.items) == 1:
+            raise ServoscopeError(f"{self.path}: {self.items[0]}")
+        raise ServoscopeError(f"{self.path}: {len(self.items)} problems: " + "; ".join(self.items))
+
+    def unknown(self, where: str, keys, allowed: set[str]) -> None:
+        for key in keys:
+            if key not in allowed:
+                near = difflib.get_close_matches(key, sorted(allowed), n=1)
+                hint = f" (did you mean {near[0]!r}?)" if near else f" (known: {', '.join(sorted(allowed))})"
+                self.add(f"{where}.{key}" if where else key, f"unknown key{hint}")
+
+    def number(self, where: str, value, *, positive: bool = False, nonzero: bool = False, nonnegative: bool = False) -> float | None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self.add(where, f"must be a finite number, got {value!r}")
+            return None
+        if positive and value <= 0:
+            self.add(where, f"must be > 0, got {value!r}")
+            return None
+        if nonnegative and value < 0:
+            self.add(where, f"must be ≥ 0, got {value!r}")
+            return None
+        if nonzero and value == 0:
+            self.add(where, "must not be 0")
+            return None
+        return float(value)
+
+    def table(self, data: dict, name: str) -> dict:
+        value = data.get(name, {})
+        if not isinstance(value, dict):
+            self.add(name, "must be a table")
+            return {}
+        return value
 
 
-def _number(path: Path, where: str, value, *, positive: bool = False, nonzero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ServoscopeError(f"{path}: {where} must be a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise ServoscopeError(f"{path}: {where} must be > 0, got {value!r}")
-    if nonzero and value == 0:
-        raise ServoscopeError(f"{path}: {where} must not be 0")
-    return float(value)
-
-
-def _table(path: Path, data: dict, name: str) -> dict:
-    value = data.get(name, {})
-    if not isinstance(value, dict):
-        raise ServoscopeError(f"{path}: [{name}] must be a table")
-    return value
-
-
-def load_campaign(path: str | Path, *, check_videos: bool = True) -> Campaign:
+def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bool = False) -> Campaign:
     """Read and validate ``campaign.toml``.
 
     Parameters
     ----------
     path : path-like
     check_videos : bool
-        Also check that every video exists and opens as a video.
+        Also check that every video exists and opens as a video, and that
+        no sine frequency reaches half the video's frame rate.
+    keep_going : bool
+        A video that cannot be read leaves its test out (listed in
+        ``Campaign.skipped``) instead of failing the manifest.
 
     Raises
     ------
     ServoscopeError
-        On the first problem, naming the file and the entry.
+        Listing every problem found, each with its location.
     """
     path = Path(path)
     try:
@@ -148,6 +187,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True) -> Campaign:
         raise ServoscopeError(f"{path}: campaign manifest not found") from None
     except IsADirectoryError:
         raise ServoscopeError(f"{path}: is a folder, not a campaign manifest") from None
+    except PermissionError:
+        raise ServoscopeError(f"{path}: cannot read the manifest (permission denied)") from None
     except UnicodeDecodeError:
         raise ServoscopeError(f"{path}: not a TOML file (not UTF-8 text)") from None
     try:
@@ -155,88 +196,136 @@ def load_campaign(path: str | Path, *, check_videos: bool = True) -> Campaign:
     except tomllib.TOMLDecodeError as exc:
         raise ServoscopeError(f"{path}: not valid TOML ({exc})") from None
     base = path.resolve().parent
-    _unknown(path, "the manifest", data.keys(), _TOP_KEYS)
+    problems = _Problems(path)
+    problems.unknown("", data.keys(), _TOP_KEYS)
 
-    camera_t = _table(path, data, "camera")
-    _unknown(path, "[camera]", camera_t.keys(), _CAMERA_KEYS)
+    camera_t = problems.table(data, "camera")
+    problems.unknown("camera", camera_t.keys(), _CAMERA_KEYS)
     camera = None
     if "calibration" in camera_t:
         if not isinstance(camera_t["calibration"], str):
-            raise ServoscopeError(f"{path}: [camera] calibration must be a file name")
-        camera = CameraModel.load(base / camera_t["calibration"])
+            problems.add("camera.calibration", "must be a file name")
+        else:
+            try:
+                camera = CameraModel.load(base / camera_t["calibration"])
+            except ServoscopeError as exc:
+                problems.add("camera.calibration", str(exc))
     exposure = None
     if "exposure_s" in camera_t:
-        exposure = _number(path, "[camera] exposure_s", camera_t["exposure_s"], positive=True)
+        exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)
 
-    markers_t = _table(path, data, "markers")
-    _unknown(path, "[markers]", markers_t.keys(), _MARKER_KEYS)
+    markers_t = problems.table(data, "markers")
+    problems.unknown("markers", markers_t.keys(), _MARKER_KEYS)
     for key in ("lead", "trail"):
         if key not in markers_t:
-            raise ServoscopeError(f"{path}: [markers] needs {key} = \"#rrggbb\" (or a CSS name, or \"auto\")")
+            problems.add(f"markers.{key}", "missing: give \"#rrggbb\", a CSS colour name, or \"auto\"")
     for key in ("lead", "trail", "led"):
         if key in markers_t:
-            parse_colour(markers_t[key], what=f"{path}: [markers] {key}")
-    if markers_t.get("led") is not None and str(markers_t["led"]).strip().lower() == "auto":
-        raise ServoscopeError(f"{path}: [markers] led must be a colour, not \"auto\"")
+            try:
+                spec = parse_colour(markers_t[key], what="colour")
+            except ServoscopeError as exc:
+                problems.add(f"markers.{key}", str(exc).removeprefix("colour: "))
+            else:
+                if key == "led" and spec == "auto":
+                    problems.add("markers.led", "must be a colour, not \"auto\"")
 
-    input_t = _table(path, data, "input")
-    _unknown(path, "[input]", input_t.keys(), _INPUT_KEYS)
+    input_t = problems.table(data, "input")
+    problems.unknown("input", input_t.keys(), _INPUT_KEYS)
     units = input_t.get("units", "normalized")
     if not isinstance(units, str):
-        raise ServoscopeError(f"{path}: [input] units must be text")
+        problems.add("input.units", "must be text")
+        units = "normalized"
 
-    analysis_t = _table(path, data, "analysis")
-    _unknown(path, "[analysis]", analysis_t.keys(), _ANALYSIS_KEYS)
-    settle = _number(path, "[analysis] settle_s", analysis_t.get("settle_s", 0.5))
-    if settle < 0:
-        raise ServoscopeError(f"{path}: [analysis] settle_s must be ≥ 0")
+    analysis_t = problems.table(data, "analysis")
+    problems.unknown("analysis", analysis_t.keys(), _ANALYSIS_KEYS)
+    settle = problems.number("analysis.settle_s", analysis_t.get("settle_s", 0.5), nonnegative=True)
 
     raw_tests = data.get("tests")
+    tests: list[TestSpec] = []
     if not isinstance(raw_tests, list) or not raw_tests:
-        raise ServoscopeError(f"{path}: no [[tests]]: list at least one recording")
-    tests = []
-    labels: set[str] = set()
+        problems.add("tests", "no [[tests]]: list at least one recording")
+        raw_tests = []
+    labels: dict[str, int] = {}
+    videos: dict[Path, int] = {}
+    skipped: list[tuple[str, str]] = []
     for i, entry in enumerate(raw_tests, start=1):
-        where = f"[[tests]] #{i}"
+        where = f"tests[{i}]"
         if not isinstance(entry, dict):
-            raise ServoscopeError(f"{path}: {where} must be a table")
-        _unknown(path, where, entry.keys(), _TEST_KEYS)
+            problems.add(where, "must be a table")
+            continue
+        problems.unknown(where, entry.keys(), _TEST_KEYS)
+        ok = True
         video = entry.get("video")
         if not isinstance(video, str) or not video:
-            raise ServoscopeError(f"{path}: {where} needs video = \"file name\"")
+            problems.add(f"{where}.video", "missing: give the recording's file name")
+            ok = False
         kind = entry.get("kind")
         if kind not in _KINDS:
-            raise ServoscopeError(f"{path}: {where} ({video}): unknown kind {kind!r} (use \"sine\" or \"step\")")
+            problems.add(f"{where}.kind", f"unknown kind {kind!r} (use \"sine\" or \"step\")")
+            ok = False
+        amplitude = None
         if "amplitude" not in entry:
-            raise ServoscopeError(f"{path}: {where} ({video}): needs amplitude")
-        amplitude = _number(path, f"{where} ({video}) amplitude", entry["amplitude"], nonzero=True)
+            problems.add(f"{where}.amplitude", "missing")
+            ok = False
+        else:
+            amplitude = problems.number(f"{where}.amplitude", entry["amplitude"], nonzero=True)
+            if amplitude is None:
+                ok = False
+            elif kind == "sine" and amplitude < 0:
+                problems.add(f"{where}.amplitude", f"must be > 0 for a sine, got {amplitude!r}")
+                ok = False
         frequency = None
         if kind == "sine":
             if "frequency_hz" not in entry:
-                raise ServoscopeError(f"{path}: {where} ({video}): a sine test needs frequency_hz")
-            frequency = _number(path, f"{where} ({video}) frequency_hz", entry["frequency_hz"], positive=True)
-            if amplitude < 0:
-                raise ServoscopeError(f"{path}: {where} ({video}) amplitude of a sine must be > 0")
-        elif "frequency_hz" in entry:
-            raise ServoscopeError(f"{path}: {where} ({video}): a step test has no frequency_hz")
+                problems.add(f"{where}.frequency_hz", "missing: a sine test needs its frequency")
+                ok = False
+            else:
+                frequency = problems.number(f"{where}.frequency_hz", entry["frequency_hz"], positive=True)
+                ok = ok and frequency is not None
+        elif kind == "step" and "frequency_hz" in entry:
+            problems.add(f"{where}.frequency_hz", "a step test has no frequency")
         t0 = None
         if "t0_s" in entry:
-            t0 = _number(path, f"{where} ({video}) t0_s", entry["t0_s"])
-        label = entry.get("label", Path(video).stem)
-        if not isinstance(label, str) or not label:
-            raise ServoscopeError(f"{path}: {where} label must be text")
-        if label in labels:
-            raise ServoscopeError(f"{path}: {where}: label {label!r} used twice")
-        labels.add(label)
-        video_path = (base / video).resolve()
-        tests.append(TestSpec(video_path, kind, amplitude, frequency, t0, label))
+            t0 = problems.number(f"{where}.t0_s", entry["t0_s"])
+        default_label = Path(video).stem if isinstance(video, str) and video else f"test{i}"
+        label = entry.get("label", default_label)
+        if not isinstance(label, str) or not label or "/" in label or "\\" in label:
+            problems.add(f"{where}.label", "must be non-empty text without slashes")
+            ok = False
+        elif label in labels:
+            problems.add(f"{where}.label", f"{label!r} is also the label of tests[{labels[label]}]")
+            ok = False
+        else:
+            labels[label] = i
+        if isinstance(video, str) and video:
+            video_path = (base / video).resolve()
+            if video_path in videos:
+                problems.add(f"{where}.video", f"{video!r} is also the video of tests[{videos[video_path]}]")
+                ok = False
+            videos.setdefault(video_path, i)
+            if check_videos and ok:
+                try:
+                    from ..video.reader import probe_video  # deferred: PyAV is slow to import
 
-    if check_videos:
-        from ..video.reader import probe_video  # deferred: PyAV is slow to import
+                    info = probe_video(video_path)
+                except ServoscopeError as exc:
+                    if keep_going:
+                        skipped.append((label, str(exc)))
+                    else:
+                        problems.add(f"{where}.video", str(exc))
+                    ok = False
+                else:
+                    if frequency is not None and info.frame_rate_hz and frequency >= 0.5 * info.frame_rate_hz:
+                        problems.add(
+                            f"{where}.frequency_hz",
+                            f"{frequency:g} Hz is at or above half the video's frame rate "
+                            f"({info.frame_rate_hz:g} frames/s): the camera cannot resolve it",
+                        )
+                        ok = False
+            if ok:
+                tests.append(TestSpec(video_path, kind, float(amplitude), frequency, t0, label))
 
-        for test in tests:
-            probe_video(test.video)
-
+    problems.raise_if_any()
     return Campaign(
         path=path.resolve(),
         lead=str(markers_t["lead"]),
@@ -245,6 +334,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True) -> Campaign:
         camera=camera,
         exposure_s=exposure,
         input_units=units,
-        settle_s=settle,
+        settle_s=float(settle),
         tests=tuple(tests),
+        skipped=tuple(skipped),
     )

@@ -43,12 +43,20 @@ def _settings(campaign: Campaign) -> TrackerSettings:
     )
 
 
-def track_campaign(campaign: Campaign, *, progress: ProgressFn | None = None) -> dict[str, Track]:
+def track_campaign(
+    campaign: Campaign, *, keep_going: bool = False, failures: dict[str, str] | None = None,
+    progress: ProgressFn | None = None,
+) -> dict[str, Track]:
     """Track every video of a campaign, in manifest order.
 
     Parameters
     ----------
     campaign : Campaign
+    keep_going : bool
+        A video that fails (unreadable, markers not found) is left out and
+        its reason stored in ``failures``, instead of raising.
+    failures : dict, optional
+        Filled with label → reason for the videos left out.
     progress : callable(label, frames_done, test_index), optional
 
     Returns
@@ -61,7 +69,13 @@ def track_campaign(campaign: Campaign, *, progress: ProgressFn | None = None) ->
         callback = None
         if progress is not None:
             callback = lambda done, _label=test.label, _i=i: progress(_label, done, _i)  # noqa: E731
-        tracks[test.label] = track_video(test.video, settings, progress=callback)
+        try:
+            tracks[test.label] = track_video(test.video, settings, progress=callback)
+        except ServoscopeError as exc:
+            if not keep_going:
+                raise
+            if failures is not None:
+                failures[test.label] = str(exc)
     return tracks
 
 
@@ -162,6 +176,7 @@ class IdentificationResult:
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
                 "tests": tests,
+                "skipped": [{"label": label, "reason": reason} for label, reason in self.campaign.skipped],
                 "warnings": list(self.warnings),
             }
         )
@@ -178,12 +193,13 @@ class IdentificationResult:
         out = Path(out_dir)
         (out / "tracks").mkdir(parents=True, exist_ok=True)
         paths = {}
+        # Every file goes to a temporary name first and is renamed when whole:
+        # a run killed half-way leaves no output that looks complete.
         for label, track in self.tracks.items():
-            p = out / "tracks" / f"{label}.csv"
-            track.to_csv(p)
+            _write_via_tmp(out / "tracks" / f"{label}.csv", track.to_csv)
         paths["tracks"] = out / "tracks"
         paths["frequency_response"] = out / "frequency_response.csv"
-        self.frequency_response.to_csv(paths["frequency_response"])
+        _write_via_tmp(paths["frequency_response"], self.frequency_response.to_csv)
         paths["report"] = out / "report.html"
         write_text_atomic(paths["report"], build_report(self))
         # result.json last: its presence says the run finished.
@@ -201,6 +217,12 @@ class IdentificationResult:
         )
 
 
+def _write_via_tmp(path: Path, writer: Callable[[Path], None]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    writer(tmp)
+    tmp.replace(path)
+
+
 def _version() -> str:
     from .. import __version__
 
@@ -212,6 +234,7 @@ def identify(
     *,
     tracks: dict[str, Track] | None = None,
     fit: str = "auto",
+    keep_going: bool = False,
     progress: ProgressFn | None = None,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -226,6 +249,9 @@ def identify(
         dwells); "complex" fits magnitude and phase with a dead time, which
         needs every dwell's input start (LED or t0_s); "auto" picks complex
         when the phases are known.
+    keep_going : bool
+        Leave out a video that cannot be tracked (with a warning) and identify
+        from the rest.
     progress : callable(label, frames_done, test_index), optional
 
     Returns
@@ -240,8 +266,11 @@ def identify(
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
     if tracks is None:
-        tracks = track_campaign(campaign, progress=progress)
-    warnings: list[str] = []
+        failures: dict[str, str] = {}
+        tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress)
+        if failures:
+            campaign = campaign.without(failures)
+    warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
     fits: dict[str, SineFit] = {}
     amplitudes = []
     for test in campaign.sine_tests:

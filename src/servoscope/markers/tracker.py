@@ -5,7 +5,14 @@ predicted position (the whole frame when lost), then measure its centroid
 from a *soft* membership: each pixel's colour is unmixed between the marker's
 colour and the local background's, so a pixel half covered by the sticker
 counts one half. That makes the centroid subpixel, where a binary threshold
-(the paper's flag) moves by whole pixels as edge pixels flip.
+(the paper's flag) moves by whole pixels as edge pixels flip (see
+:mod:`servoscope.markers.centroid`).
+
+A frame is *invalid*, with a reason, when a marker is not found, is partly
+hidden (its soft area or second moments differ from the marker's own
+reference), touches the image border, or its centroid lies outside the
+lens model's trusted region; and when the frame repeats the previous image
+(a duplicated frame) or its timestamp does not advance.
 """
 
 from __future__ import annotations
@@ -21,8 +28,10 @@ import numpy as np
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from ..video.reader import iter_frames, probe_video
+from .centroid import SoftCentroid, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
-from .moments import Moments, weighted_moments
+from .moments import Moments
+from .timebase import frame_timing
 
 __all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids"]
 
@@ -56,7 +65,18 @@ class TrackerSettings:
         Exposure time, for the LED's sub-frame switch time; None assumes the
         exposure lasts the whole frame interval.
     search_radius_px : float
-        Half-size of the search window beyond the marker's own extent.
+        Half-size of the search window beyond the marker's own extent (px).
+    support_margin_px : float
+        Background margin around the sticker over which its soft moments are
+        taken (px); the sticker's edge blur must fit inside it.
+    shape_tolerance : float
+        Largest relative change of a marker's soft area, or of its second-
+        moment axes, from the marker's reference before the frame is flagged
+        as partly hidden (0.03 = 3 %).
+    deinterlace : {None, "fields", "fields-bff"}
+        Split each interlaced frame into its two fields, each with its own
+        time (double rate): ``"fields"`` top field first, ``"fields-bff"``
+        bottom field first. Centroids stay in frame-row coordinates.
     """
 
     lead: str = "#d62728"
@@ -65,6 +85,9 @@ class TrackerSettings:
     camera: CameraModel | None = None
     exposure_s: float | None = None
     search_radius_px: float = 24.0
+    support_margin_px: float = 3.0
+    shape_tolerance: float = 0.03
+    deinterlace: str | None = None
 
 
 @dataclass

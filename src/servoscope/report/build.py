@@ -123,7 +123,8 @@ def build_report(result: "IdentificationResult") -> str:
         )
         from ..sysid import model_step_metrics
 
-        predicted_metrics = model_step_metrics(model.transfer_function)
+        # Predicted with the same dead time, so that both columns count from the input start.
+        predicted_metrics = model_step_metrics(model.transfer_function, dead_time_s=st.dead_time_s or 0.0)
         s.table(
             ["metric", "measured", "predicted by the model"],
             [
