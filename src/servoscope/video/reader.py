@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["VideoInfo", "Frame", "probe_video", "iter_frames"]
+__all__ = ["VideoInfo", "Frame", "FIELD_ORDERS", "probe_video", "iter_frames"]
 
 
 @dataclass(frozen=True)
@@ -57,15 +57,28 @@ class Frame:
     Attributes
     ----------
     index : int
-        Position in decoding order, from 0.
+        Position in decoding order, from 0 (counting fields when split).
     time_s : float
-        Presentation time in seconds (PTS × time base).
+        Presentation time in seconds (PTS × time base; for the second field
+        of a split frame, half a frame interval later).
     rgb : ndarray, shape (height, width, 3), uint8
+        The frame, or one field of it (every second row).
+    row_offset, row_step : int
+        Row ``j`` of ``rgb`` is row ``row_offset + row_step·j`` of the full
+        frame: (0, 1) for whole frames, (0, 2) / (1, 2) for top / bottom fields.
     """
 
     index: int
     time_s: float
     rgb: np.ndarray
+    row_offset: int = 0
+    row_step: int = 1
+
+    def to_frame_xy(self, xy_px: np.ndarray) -> np.ndarray:
+        """Points in this image (px, shape (..., 2)) in full-frame coordinates."""
+        xy = np.array(xy_px, dtype=np.float64, copy=True)
+        xy[..., 1] = self.row_offset + self.row_step * xy[..., 1]
+        return xy
 
 
 def _open(path: Path) -> av.container.InputContainer:
@@ -82,6 +95,10 @@ def _open(path: Path) -> av.container.InputContainer:
     if not container.streams.video:
         container.close()
         raise ServoscopeError(f"{path}: has no video stream")
+    if container.streams.video[0].codec_context is None:
+        # Found by fuzzing: a stream whose codec FFmpeg does not know has no decoder context.
+        container.close()
+        raise ServoscopeError(f"{path}: video stream in a codec FFmpeg cannot decode")
     return container
 
 
@@ -125,7 +142,11 @@ def probe_video(path: str | Path) -> VideoInfo:
         container.close()
 
 
-def iter_frames(path: str | Path, *, threads: int = 0) -> Iterator[Frame]:
+#: Accepted values of ``iter_frames(..., fields=)``.
+FIELD_ORDERS = (None, "tff", "bff")
+
+
+def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None) -> Iterator[Frame]:
     """Decode a video's frames in order, as RGB arrays with their PTS times.
 
     Parameters
@@ -133,6 +154,11 @@ def iter_frames(path: str | Path, *, threads: int = 0) -> Iterator[Frame]:
     path : path-like
     threads : int
         Decoder threads; 0 lets FFmpeg choose.
+    fields : {None, "tff", "bff"}
+        Split each interlaced frame into its two fields (every second row),
+        yielded in recording order (top field first for ``"tff"``), the
+        second half a frame interval after the first: twice the rate, half
+        the rows (see :attr:`Frame.row_offset`).
 
     Yields
     ------
@@ -145,6 +171,8 @@ def iter_frames(path: str | Path, *, threads: int = 0) -> Iterator[Frame]:
         A video that breaks later ends early; the caller sees fewer frames.
     """
     path = Path(path)
+    if fields not in FIELD_ORDERS:
+        raise ServoscopeError(f"fields must be one of None, 'tff', 'bff', not {fields!r}")
     container = _open(path)
     try:
         stream = container.streams.video[0]
@@ -165,8 +193,16 @@ def iter_frames(path: str | Path, *, threads: int = 0) -> Iterator[Frame]:
                 else:
                     time_s = 0.0
                 last_time = time_s
-                yield Frame(index, time_s, frame.to_ndarray(format="rgb24"))
-                index += 1
+                rgb = frame.to_ndarray(format="rgb24")
+                if fields is None:
+                    yield Frame(index, time_s, rgb)
+                    index += 1
+                    continue
+                half = 0.5 / float(rate) if rate else 0.0
+                order = (0, 1) if fields == "tff" else (1, 0)
+                for k, parity in enumerate(order):
+                    yield Frame(index, time_s + k * half, np.ascontiguousarray(rgb[parity::2]), parity, 2)
+                    index += 1
         except av.error.FFmpegError as exc:
             if index == 0:
                 raise ServoscopeError(f"{path}: cannot decode any frame ({_reason(exc)})") from None
