@@ -79,8 +79,11 @@ def simulate(outdir: Path, preset: str, seed: int) -> None:
 @click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
 @click.option("--exposure", "exposure_s", type=float, help="Exposure time in seconds (for the LED's sub-frame timing).")
-@click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Track CSV to write.")
-def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None, out_csv: Path) -> None:
+@click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), help="Track CSV to write [default: VIDEO.track.csv].")
+@click.option("--deinterlace", type=click.Choice(["none", "fields", "fields-bff"]), default="none", show_default=True,
+              help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
+def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
+          out_csv: Path | None, deinterlace: str) -> None:
     """Track the two markers through VIDEO and write the per-frame angles."""
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
@@ -93,11 +96,19 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     camera = CameraModel.load(calibration) if calibration else None
     if exposure_s is not None and not exposure_s > 0:
         raise ServoscopeError(f"--exposure must be > 0, got {exposure_s}")
-    result = track_video(video, TrackerSettings(lead, trail, led_spec, camera, exposure_s))
+    settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
+                               deinterlace=None if deinterlace == "none" else deinterlace)
+    result = track_video(video, settings)
+    if out_csv is None:
+        out_csv = video.with_name(video.stem + ".track.csv")
     out_csv.parent.mkdir(parents=True, exist_ok=True)
     result.to_csv(out_csv)
-    t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s"
-    click.echo(f"{video.name}: {result.n_valid}/{result.n_frames} valid frames, input start t0 = {t0}; wrote {out_csv}")
+    s = result.summary()
+    t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
+    sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
+    noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}°"
+    click.echo(f"{video.name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
+               f"sticker separation {sep}, angle noise {noise} (1σ), LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
 

@@ -45,9 +45,11 @@ def _settings(campaign: Campaign) -> TrackerSettings:
 
 def track_campaign(
     campaign: Campaign, *, keep_going: bool = False, failures: dict[str, str] | None = None,
-    progress: ProgressFn | None = None,
+    progress: ProgressFn | None = None, workers: int | None = 1, scheduler: str | None = None,
+    cache_dir: str | Path | None = None, force: bool = False,
+    on_done: Callable[[str, str], None] | None = None,
 ) -> dict[str, Track]:
-    """Track every video of a campaign, in manifest order.
+    """Track every video of a campaign; tracks returned in manifest order.
 
     Parameters
     ----------
@@ -58,24 +60,43 @@ def track_campaign(
     failures : dict, optional
         Filled with label → reason for the videos left out.
     progress : callable(label, frames_done, test_index), optional
+        In-process: every 50 frames and at each video's end; on Dask: once
+        per video, as its track arrives.
+    workers : int or None
+        1 (default): one video after the other in this process, no Dask.
+        N > 1: a local Dask cluster of N single-threaded worker processes
+        (it takes a few seconds to start). None: one worker per core.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``"tcp://host:8786"``); its
+        workers must see the videos at the same paths.
+    cache_dir : path-like, optional
+        Keep each track there (e.g. ``<out>/.cache``), keyed by the video's
+        content hash and the tracking settings, and reuse it on the next
+        run; see :mod:`servoscope.campaign.cache`.
+    force : bool
+        Track again even what is cached.
+    on_done : callable(label, status), optional
+        Once per video as it completes: status "cached", "tracked" or "failed".
 
     Returns
     -------
     dict of label → Track
+
+    Notes
+    -----
+    The tracks do not depend on ``workers``, ``scheduler`` or the cache:
+    they are bit-identical whichever way they were made.
     """
-    settings = _settings(campaign)
-    tracks: dict[str, Track] = {}
-    for i, test in enumerate(campaign.tests):
-        callback = None
-        if progress is not None:
-            callback = lambda done, _label=test.label, _i=i: progress(_label, done, _i)  # noqa: E731
-        try:
-            tracks[test.label] = track_video(test.video, settings, progress=callback)
-        except ServoscopeError as exc:
-            if not keep_going:
-                raise
-            if failures is not None:
-                failures[test.label] = str(exc)
+    from .cache import TrackCache  # deferred: only this function needs them
+    from .parallel import track_many
+
+    cache = TrackCache(cache_dir) if cache_dir is not None else None
+    tracks, failed = track_many(
+        campaign.tests, _settings(campaign), workers=workers, scheduler=scheduler, cache=cache, force=force,
+        keep_going=keep_going, progress=progress, on_done=on_done,
+    )
+    if failures is not None:
+        failures.update(failed)
     return tracks
 
 

@@ -87,7 +87,9 @@ class ColourModel:
     def from_seed(cls, rgb: tuple[float, float, float]) -> "ColourModel":
         """A permissive model around a user-given colour, for the first detection."""
         h, s, v = hsv_of_rgb(np.array(rgb, dtype=np.float64).round().clip(0, 255).astype(np.uint8)).ravel()
-        return cls(tuple(rgb), float(h), 12.0, max(40.0, 0.35 * float(s)), max(30.0, 0.25 * float(v)))
+        # Saturation floor at half the seed's: a blue sticker must not match
+        # a blue-grey sky (saturation ~60) before its own colour is learned.
+        return cls(tuple(rgb), float(h), 12.0, max(40.0, 0.5 * float(s)), max(30.0, 0.25 * float(v)))
 
     @classmethod
     def learn(cls, pixels_rgb: np.ndarray) -> "ColourModel":

@@ -1,0 +1,311 @@
+"""Choose the order ``(nb, na)`` of the transfer function from the data.
+
+The paper estimates the order graphically, from the high-frequency slope of
+the log-magnitude plot (about -20 dB/decade per excess pole). This module
+does that step numerically and then fits every candidate order and compares
+them by an information criterion and CIFER's cost J:
+
+1. *Slope*: weighted straight line through ``gain_db`` against
+   ``log10(w)`` over the top half decade of the data (at least 3 points);
+   ``relative_degree_estimate = max(1, round(-slope/20))``. The slope
+   measured below the asymptote is shallower than the asymptote, so this
+   estimate is a lower bound and is reported, not imposed.
+2. *Candidates*: every ``0 <= nb < na <= max_order`` that the data can
+   determine with at least one degree of freedom left.
+3. *Choice*: candidates with a parameter the data do not determine
+   (relative standard error > 100 %, a pole or zero far outside the band:
+   over-parameterized, typically a near pole-zero cancellation) are
+   rejected; among the rest with an acceptable ``J <= 100`` (all of
+   them if none is), the lowest criterion (BIC by default); candidates
+   whose criterion is within 2 of the lowest are considered equally good
+   (Kass & Raftery: "not worth more than a bare mention") and the one with
+   the fewest parameters wins (then the lowest criterion).
+
+The criteria are ``chi2/phi + 2p`` (AIC) and ``chi2/phi + p*ln(m)`` (BIC),
+where ``phi = max(1, min reduced chi2 over the determined candidates)``:
+when even the best-fitting candidate leaves more scatter than the measured
+standard errors explain (understated errors, model error), the residuals
+are rescaled by it (Mallows' choice) so that the penalty keeps its weight.
+The table's AIC/BIC, and those of the fits in `fits`, are these values.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+
+from servoscope.errors import ServoscopeError
+from servoscope.sysid._rational import Structure
+from servoscope.sysid.frequency_response import FrequencyResponse
+from servoscope.sysid.sine import _import_pandas, _jsonable
+from servoscope.sysid.tf_fit import (
+    J_ACCEPTABLE,
+    TransferFunctionFit,
+    _identifiability_problem,
+    _prepare,
+    _sigma,
+    fit_transfer_function,
+)
+
+__all__ = ["OrderSelection", "estimate_slope_db_per_decade", "select_order"]
+
+#: Criterion differences below this are "not worth more than a bare mention".
+CRITERION_TIE = 2.0
+
+_TABLE_KEYS = (
+    "order", "n_params", "J", "AIC", "BIC", "residual_rms_db", "residual_rms_deg", "relative_degree", "determined",
+    "chosen",
+)
+
+
+def estimate_slope_db_per_decade(fr: FrequencyResponse) -> tuple[float, float]:
+    """High-frequency slope of the measured gain, dB/decade, with its standard error.
+
+    Weighted least-squares line of ``gain_db`` against ``log10(w)`` over the
+    points within half a decade of the highest frequency (at least the top
+    3 points).
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+
+    Returns
+    -------
+    slope_db_per_decade, stderr_db_per_decade : float
+        NaN when fewer than 2 distinct frequencies have a usable gain.
+    """
+    ok = np.isfinite(fr.gain) & (fr.gain > 0)
+    w = fr.omega_rad_s[ok]
+    if w.size < 2:
+        return float("nan"), float("nan")
+    o = np.argsort(w, kind="stable")
+    w = w[o]
+    db = fr.gain_db[ok][o]
+    sig = _sigma(fr.gain_db_stderr[ok][o] * (math.log(10.0) / 20.0)) * (20.0 / math.log(10.0))
+    top = w >= w[-1] / math.sqrt(10.0)
+    if np.count_nonzero(top) < 3:
+        top = np.zeros(w.size, bool)
+        top[-min(3, w.size):] = True
+    x = np.log10(w[top])
+    if np.ptp(x) <= 0:
+        return float("nan"), float("nan")
+    y, s = db[top], sig[top]
+    A = np.column_stack([np.ones_like(x), x]) / s[:, None]
+    b = y / s
+    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+    cov = np.linalg.inv(A.T @ A)
+    dof = x.size - 2
+    if dof > 0:
+        r = A @ coef - b
+        cov = cov * max(float(r @ r) / dof, 1.0)
+    return float(coef[1]), float(math.sqrt(cov[1, 1]))
+
+
+@dataclass(frozen=True)
+class OrderSelection:
+    """Result of :func:`select_order`.
+
+    Attributes
+    ----------
+    table : tuple of dict
+        One row per candidate, ascending ``n_params``: ``order`` ([nb, na]),
+        ``n_params``, ``J``, ``AIC``, ``BIC``, ``residual_rms_db``,
+        ``residual_rms_deg``, ``relative_degree`` (na - nb), ``determined``
+        (every pole/zero parameter determined by the data), ``chosen``.
+    best : TransferFunctionFit
+        The chosen model.
+    fits : dict of (nb, na) to TransferFunctionFit
+        Every candidate's fit.
+    criterion : str
+        "BIC" or "AIC".
+    mode : str
+        "magnitude" or "complex".
+    slope_db_per_decade, slope_stderr_db_per_decade : float
+        Measured high-frequency slope (see :func:`estimate_slope_db_per_decade`).
+    relative_degree_estimate : int or None
+        ``max(1, round(-slope/20))`` (None when the slope is unknown).
+    noise_scale : float
+        ``phi`` (see the module docstring); 1 when the measured standard
+        errors explain the scatter of the best candidate.
+    warnings : tuple of str
+        Candidates that could not be fitted, disagreements.
+    """
+
+    table: tuple[dict[str, Any], ...]
+    best: TransferFunctionFit
+    fits: dict[tuple[int, int], TransferFunctionFit] = field(repr=False)
+    criterion: str
+    mode: str
+    slope_db_per_decade: float
+    slope_stderr_db_per_decade: float
+    relative_degree_estimate: int | None
+    noise_scale: float = 1.0
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def order(self) -> tuple[int, int]:
+        """The chosen ``(nb, na)``."""
+        return self.best.order
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-serializable dict: chosen order, criterion, slope, table, warnings."""
+        return _jsonable(
+            {
+                "chosen_order": list(self.best.order),
+                "criterion": self.criterion,
+                "mode": self.mode,
+                "slope_db_per_decade": self.slope_db_per_decade,
+                "slope_stderr_db_per_decade": self.slope_stderr_db_per_decade,
+                "relative_degree_estimate": self.relative_degree_estimate,
+                "noise_scale": self.noise_scale,
+                "table": [dict(r) for r in self.table],
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def to_pandas(self) -> Any:
+        """The table as a pandas DataFrame. Needs pandas."""
+        pd = _import_pandas()
+        rows = [dict(r, order=f"({r['order'][0]}, {r['order'][1]})") for r in self.table]
+        return pd.DataFrame(rows, columns=list(_TABLE_KEYS))
+
+    def _repr_html_(self) -> str:
+        head = "".join(f"<th>{k}</th>" for k in _TABLE_KEYS)
+
+        def cell(v: Any) -> str:
+            if isinstance(v, float):
+                return f"{v:.4g}"
+            if isinstance(v, list):
+                return f"({v[0]}, {v[1]})"
+            return "✔" if v is True else ("" if v is False or v is None else str(v))
+
+        body = "".join(
+            "<tr>" + "".join(f"<td>{cell(r[k])}</td>" for k in _TABLE_KEYS) + "</tr>" for r in self.table
+        )
+        cap = (
+            f"Order selection ({self.mode}, {self.criterion}); high-frequency slope "
+            f"{self.slope_db_per_decade:.1f} ± {self.slope_stderr_db_per_decade:.1f} dB/decade"
+        )
+        return f"<table><caption>{cap}</caption><tr>{head}</tr>{body}</table>"
+
+
+def select_order(
+    fr: FrequencyResponse,
+    *,
+    mode: Literal["magnitude", "complex"] = "magnitude",
+    max_order: int = 4,
+    criterion: Literal["BIC", "AIC"] = "BIC",
+    zeros: Literal["minimum_phase", "free"] = "minimum_phase",
+    candidates: list[tuple[int, int]] | None = None,
+) -> OrderSelection:
+    """Fit candidate orders and pick one (see the module docstring).
+
+    Parameters
+    ----------
+    fr : FrequencyResponse
+        Measured frequency response.
+    mode : {"magnitude", "complex"}, default "magnitude"
+        Passed to :func:`~servoscope.sysid.tf_fit.fit_transfer_function`.
+    max_order : int, default 4
+        Highest denominator degree ``na`` tried (1..4).
+    criterion : {"BIC", "AIC"}, default "BIC"
+        Information criterion used for the choice.
+    zeros : {"minimum_phase", "free"}, default "minimum_phase"
+        Zero parameterization of the candidates.
+    candidates : list of (nb, na), optional
+        Orders to try instead of all ``0 <= nb < na <= max_order``.
+
+    Returns
+    -------
+    OrderSelection
+
+    Raises
+    ------
+    ServoscopeError
+        Bad options, or no candidate order can be determined by the data
+        (the message says what is missing).
+    """
+    if criterion not in ("BIC", "AIC"):
+        raise ServoscopeError(f"select_order: criterion must be 'BIC' or 'AIC', got {criterion!r}")
+    if not (1 <= int(max_order) <= 4):
+        raise ServoscopeError(f"select_order: max_order must be 1..4, got {max_order!r}")
+    if mode not in ("magnitude", "complex"):
+        raise ServoscopeError(f"select_order: unknown mode {mode!r} (use 'magnitude' or 'complex')")
+    if candidates is None:
+        candidates = [(nb, na) for na in range(1, int(max_order) + 1) for nb in range(na)]
+    d, _ = _prepare(fr, mode, "select_order")
+    m = d.n + int(np.count_nonzero(d.has_ph))
+    warns: list[str] = []
+    fits: dict[tuple[int, int], TransferFunctionFit] = {}
+    first_problem = None
+    for nb, na in candidates:
+        st = Structure(int(nb), int(na), zeros, mode == "complex", 1.0)
+        problem = _identifiability_problem(d, st, mode)
+        if problem is None and st.n_params >= m:
+            problem = f"order ({nb}, {na}) has {st.n_params} parameters for {m} residuals: no degree of freedom left"
+        if problem is not None:
+            first_problem = first_problem or problem
+            warns.append(f"order ({nb}, {na}) not tried: {problem}")
+            continue
+        fits[(int(nb), int(na))] = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros)
+    if not fits:
+        raise ServoscopeError(f"select_order: no candidate order can be fitted: {first_problem}")
+
+    # Noise scale from the best-fitting determined candidate (see docstring).
+    red = [2.0 * f.cost / (f.n_residuals - f.n_params) for f in fits.values() if not f.undetermined]
+    phi = max(1.0, min(red)) if red else 1.0
+    if phi > 1.0:
+        fits = {
+            o: replace(
+                f,
+                aic=2.0 * f.cost / phi + 2.0 * f.n_params,
+                bic=2.0 * f.cost / phi + f.n_params * math.log(f.n_residuals),
+            )
+            for o, f in fits.items()
+        }
+    key = "bic" if criterion == "BIC" else "aic"
+    determined = [o for o, f in fits.items() if not f.undetermined] or list(fits)
+    eligible = [o for o in determined if fits[o].J <= J_ACCEPTABLE] or determined
+    best_score = min(getattr(fits[o], key) for o in eligible)
+    near = [o for o in eligible if getattr(fits[o], key) <= best_score + CRITERION_TIE]
+    chosen = min(near, key=lambda o: (fits[o].n_params, getattr(fits[o], key)))
+
+    slope, slope_se = estimate_slope_db_per_decade(fr)
+    rel = None if not math.isfinite(slope) else max(1, int(math.floor(-slope / 20.0 + 0.5)))
+    if rel is not None and chosen[1] - chosen[0] < rel:
+        warns.append(
+            f"the chosen order {chosen} rolls off at {-20 * (chosen[1] - chosen[0])} dB/decade but the data fall at "
+            f"{slope:.1f} dB/decade at the highest frequencies"
+        )
+    rows = []
+    for o in sorted(fits, key=lambda o: (fits[o].n_params, o)):
+        f = fits[o]
+        rows.append(
+            {
+                "order": [o[0], o[1]],
+                "n_params": f.n_params,
+                "J": f.J,
+                "AIC": f.aic,
+                "BIC": f.bic,
+                "residual_rms_db": f.residual_rms_db,
+                "residual_rms_deg": f.residual_rms_deg,
+                "relative_degree": o[1] - o[0],
+                "determined": not f.undetermined,
+                "chosen": o == chosen,
+            }
+        )
+    return OrderSelection(
+        table=tuple(rows),
+        best=fits[chosen],
+        fits=fits,
+        criterion=criterion,
+        mode=mode,
+        slope_db_per_decade=slope,
+        slope_stderr_db_per_decade=slope_se,
+        relative_degree_estimate=rel,
+        noise_scale=phi,
+        warnings=tuple(warns),
+    )
