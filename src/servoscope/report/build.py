@@ -149,6 +149,17 @@ def build_report(result: "IdentificationResult") -> str:
             "Squares: the markers' centroids; solid line: the line joining them; dashed: horizontal reference.",
             "Frame with detected centroids",
         )
+        from ..markers.error_analysis import angle_error_analysis, plot_angle_error
+
+        analysis = angle_error_analysis(track)
+        if analysis.get("separation_px") and math.isfinite(analysis["separation_px"]):
+            s.figure(
+                plot_angle_error(analysis),
+                f"Angle error against sticker separation (paper Fig. 6): at {analysis['separation_px']:.0f} px, "
+                f"a 1 px centroid error bounds the angle error at {analysis['worst_case_deg']:.3f}°; the measured "
+                f"centroid noise ({analysis['centroid_sigma_px']:.3f} px) gives {analysis['angle_sigma_deg']:.4f}° (1σ).",
+                "Error analysis",
+            )
         s.table(
             ["video", "frames", "valid", "t0 (s)", "warnings"],
             [[t["video"], t["frames"], t["valid_frames"], t["t0_s"], "; ".join(t["warnings"]) or "—"] for t in summary["tests"]],
