@@ -24,15 +24,19 @@ def _progress_enabled(quiet: bool) -> bool:
 
 
 class _Progress:
-    """A rich progress bar over a campaign's videos, or nothing."""
+    """A rich progress bar over a campaign's videos (videos done, frames/s, time left), or nothing."""
 
     def __init__(self, enabled: bool, tests):
         self.enabled = enabled
         self.tests = list(tests)
         self._bar = None
+        self._frames: dict[str, int] = {}
+        self._start = 0.0
 
     def __enter__(self):
         if self.enabled:
+            import time
+
             from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
             self._bar = Progress(
@@ -41,15 +45,24 @@ class _Progress:
             )
             self._bar.__enter__()
             self._task = self._bar.add_task("tracking", total=len(self.tests))
+            self._start = time.perf_counter()
         return self
 
     def __call__(self, label: str, frames_done: int, index: int) -> None:
         if self._bar is not None:
-            self._bar.update(self._task, completed=index, description=f"tracking {label} ({frames_done} frames)")
+            import time
+
+            self._frames[label] = frames_done
+            total = sum(self._frames.values())
+            rate = total / max(time.perf_counter() - self._start, 1e-9)
+            self._bar.update(self._task, description=f"tracking {label}: {total} frames, {rate:.0f} frames/s")
+
+    def done(self, label: str, status: str) -> None:
+        if self._bar is not None:
+            self._bar.advance(self._task)
 
     def __exit__(self, *exc):
         if self._bar is not None:
-            self._bar.update(self._task, completed=len(self.tests))
             self._bar.__exit__(*exc)
         return False
 
@@ -82,8 +95,10 @@ def simulate(outdir: Path, preset: str, seed: int) -> None:
 @click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), help="Track CSV to write [default: VIDEO.track.csv].")
 @click.option("--deinterlace", type=click.Choice(["none", "fields", "fields-bff"]), default="none", show_default=True,
               help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
+@click.option("--overlay", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the footage with the centroids, joining line and angle drawn (.mp4 or .mov).")
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
-          out_csv: Path | None, deinterlace: str) -> None:
+          out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
     """Track the two markers through VIDEO and write the per-frame angles."""
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
@@ -96,6 +111,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     camera = CameraModel.load(calibration) if calibration else None
     if exposure_s is not None and not exposure_s > 0:
         raise ServoscopeError(f"--exposure must be > 0, got {exposure_s}")
+    if overlay is not None and overlay.suffix.lower() not in (".mp4", ".mov"):
+        raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace)
     result = track_video(video, settings)
@@ -111,6 +128,12 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
                f"sticker separation {sep}, angle noise {noise} (1σ), LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
+    if overlay is not None:
+        from .video.overlay import write_overlay
+
+        overlay.parent.mkdir(parents=True, exist_ok=True)
+        write_overlay(video, result, overlay, camera=camera)
+        click.echo(f"wrote {overlay}")
 
 
 @cli.command()
@@ -158,17 +181,29 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @click.option("--fit", "fit_mode", type=click.Choice(["auto", "magnitude", "complex"]), default="auto", show_default=True,
               help="magnitude: |G| only (the paper's); complex: magnitude and phase with a dead time; auto: complex when every dwell's input start is known.")
 @click.option("--keep-going", is_flag=True, help="Leave out videos that cannot be read or tracked (with a warning) and identify from the rest.")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=0),
+              help="Videos tracked in parallel by a local Dask cluster of this many processes; 0 = one per core.")
+@click.option("--scheduler", help="Send the tracking to an existing Dask cluster (tcp://HOST:PORT); videos must be on a path the workers share.")
+@click.option("--force", is_flag=True, help="Track again even where a cached track exists (tracks are cached in OUT/.cache).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
-def identify(campaign: Path, out_dir: Path, fit_mode: str, keep_going: bool, quiet: bool, as_json: bool) -> None:
+def identify(campaign: Path, out_dir: Path, fit_mode: str, keep_going: bool, workers: int, scheduler: str | None,
+             force: bool, quiet: bool, as_json: bool) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
-    from .campaign import load_campaign
+    from .campaign import load_campaign, track_campaign
 
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
     _check_out_dir(out_dir, manifest)
+    failures: dict[str, str] = {}
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
-        result = run_identify(manifest, fit=fit_mode, keep_going=keep_going, progress=progress)
+        tracks = track_campaign(
+            manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
+            workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache", force=force,
+        )
+    if failures:
+        manifest = manifest.without(failures)
+    result = run_identify(manifest, tracks=tracks, fit=fit_mode, keep_going=keep_going)
     paths = result.write(out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._io import jsonable, write_json_atomic, write_text_atomic
 from ..errors import ServoscopeError
-from ..markers.tracker import Track, TrackerSettings, track_video
+from ..markers.tracker import Track, TrackerSettings
 from ..sysid import (
     FrequencyResponse,
     SineFit,
@@ -257,6 +257,7 @@ def identify(
     fit: str = "auto",
     keep_going: bool = False,
     progress: ProgressFn | None = None,
+    **track_options,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
 
@@ -273,6 +274,9 @@ def identify(
     keep_going : bool
         Leave out a video that cannot be tracked (with a warning) and identify
         from the rest.
+    **track_options
+        Passed to :func:`track_campaign` when ``tracks`` is not given
+        (``workers``, ``scheduler``, ``cache_dir``, ``force``, ``on_done``).
     progress : callable(label, frames_done, test_index), optional
 
     Returns
@@ -288,7 +292,7 @@ def identify(
         campaign = load_campaign(campaign)
     if tracks is None:
         failures: dict[str, str] = {}
-        tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress)
+        tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress, **track_options)
         if failures:
             campaign = campaign.without(failures)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
