@@ -35,7 +35,7 @@ def test_recovers_parameters_within_few_stderr():
     rng = np.random.default_rng(42)
     amp, f, ph, off = 0.05, 3.0, -0.7, 0.01
     y = sine(t, amp, f, ph, off) + 1e-4 * rng.standard_normal(t.size)
-    r = fit_sine(t, y, 3.0, t0_s=T0)
+    r = fit_sine(t, y, 3.0, t0_s=T0, settle_s=0.5)
     assert isinstance(r, SineFit)
     assert abs(r.amplitude - amp) < 4 * r.amplitude_stderr
     assert abs(r.frequency_hz - f) < 4 * r.frequency_stderr_hz
@@ -234,3 +234,78 @@ def test_t0_uncertainty_widens_the_phase_error():
     b = fit_sine(t, y, 4.0, t0_s=T0, t0_stderr_s=1e-3)
     assert b.phase_stderr_rad == pytest.approx(math.hypot(a.phase_stderr_rad, 2 * math.pi * 4.0 * 1e-3), rel=1e-9)
     assert b.phase_rad == a.phase_rad
+
+
+# ------------------------------------------------ steady state, harmonics, flags
+def test_auto_window_starts_after_the_transient():
+    """Twin output from rest (85 ms dead time, then the transient): auto settle finds its end."""
+    from servoscope.simulate import PAPER_SERVO, InputSignal
+
+    t = frames(3.5)
+    f = 2.0
+    y_clean = PAPER_SERVO.response(InputSignal("sine", 0.1, f, t0_s=T0), t)
+    rng = np.random.default_rng(8)
+    y = y_clean + 1e-4 * rng.standard_normal(t.size)
+    r = fit_sine(t, y, f, t0_s=T0)
+    # Transient: dead time + decay exp(-zeta*wn*t) = exp(-24 t) from ~0.01 rad
+    # to the 3e-4 rad detection level takes ~0.15 s.
+    assert 0.15 < r.settle_s < 0.45
+    assert r.window_s[0] == pytest.approx(T0 + r.settle_s, abs=0.011)
+    g = complex(control.evalfr(PAPER_G, 2j * np.pi * f)) * np.exp(-2j * np.pi * f * 0.085)
+    assert abs(r.amplitude - 0.1 * abs(g)) < 4 * r.amplitude_stderr
+    assert abs(wrap(r.phase_rad - np.angle(g))) < 4 * r.phase_stderr_rad
+    assert "transient" not in r.flags
+    # Too short a numeric settle_s: the remaining transient is reported.
+    short = fit_sine(t, y, f, t0_s=T0, settle_s=0.02)
+    assert "transient" in short.flags and any("settle_s='auto'" in w for w in short.warnings)
+    assert short.settle_s == pytest.approx(0.02)
+
+
+def test_harmonics_and_thd_are_exact_for_a_distorted_sine():
+    t = np.arange(400) / FPS
+    a1, a2, a3, a5 = 0.05, 0.004, 0.002, 0.001
+    w = 2 * np.pi * 2.0
+    y = a1 * np.sin(w * t) + a2 * np.cos(2 * w * t + 0.4) + a3 * np.sin(3 * w * t - 1.0) + a5 * np.sin(5 * w * t)
+    r = fit_sine(t, y, 2.0, t0_s=0.0, settle_s=0.0, refine_frequency=False)
+    np.testing.assert_allclose(r.harmonic_amplitudes, [a2, a3, 0.0, a5], atol=1e-12)
+    assert r.thd == pytest.approx(math.sqrt(a2**2 + a3**2 + a5**2) / a1, rel=1e-9)
+    assert r.harmonic_residual_rms < 1e-12
+    assert "distorted" in r.flags  # 9 % THD, far above noise
+    # Harmonics at or above 95 % of Nyquist are not fitted: 12 Hz at 100 fps -> only k = 2, 3.
+    r12 = fit_sine(t, np.sin(2 * np.pi * 12.0 * t), 12.0, t0_s=0.0, settle_s=0.0)
+    assert r12.harmonic_amplitudes[2:] == (None, None)
+    assert r12.thd == pytest.approx(0.0, abs=1e-9) and r12.flags == ()
+    json.dumps(r.summary(), allow_nan=False)
+    assert r.summary()["flags"] == ["distorted"]
+
+
+def test_pure_noisy_sine_is_not_flagged_distorted():
+    t = frames(4.0)
+    count = 0
+    for seed in range(20):
+        y = sine(t, 0.01, 3.0, 0.2) + 5e-4 * np.random.default_rng(seed).standard_normal(t.size)
+        r = fit_sine(t, y, 3.0, t0_s=T0)
+        count += "distorted" in r.flags
+        assert r.thd < 0.05
+    assert count <= 1
+
+
+def test_flags_for_invalid_frames_aliasing_and_frequency_mismatch():
+    t = frames()
+    y = sine(t, 0.05, 3.0, 0.2) + 1e-4 * np.random.default_rng(0).standard_normal(t.size)
+    valid = np.ones(t.size, bool)
+    window = t >= T0 + 0.5
+    idx = np.nonzero(window)[0]
+    valid[idx[::3]] = False  # a third of the window's frames lost
+    r = fit_sine(t, y, 3.0, t0_s=T0, settle_s=0.5, valid=valid)
+    assert r.invalid_fraction == pytest.approx(idx[::3].size / idx.size)
+    assert "invalid_frames" in r.flags
+    ok = fit_sine(t, y, 3.0, t0_s=T0, settle_s=0.5)
+    assert ok.invalid_fraction == 0.0 and ok.flags == ()
+    # 44 Hz at 100 frames/s: 88 % of the Nyquist frequency.
+    y44 = sine(t, 0.05, 44.0, 0.2)
+    assert "aliasing" in fit_sine(t, y44, 44.0, t0_s=T0).flags
+    # Energy at 3 Hz, commanded 4.5 Hz.
+    assert "frequency_mismatch" in fit_sine(t, y, 4.5, t0_s=T0).flags
+    with pytest.raises(ServoscopeError, match="settle_s"):
+        fit_sine(t, y, 3.0, settle_s="soon")

@@ -139,3 +139,15 @@ def test_to_pandas_or_clear_import_error():
             r.to_pandas()
     else:
         assert list(r.to_pandas().columns) == ["time_s", "y", "predicted"]
+
+
+def test_summary_predicted_metrics_are_the_models_step_info():
+    t, y = record(0)
+    r = analyse_step(t, y, t0_s=T0, step_size=STEP, model=PAPER_G)
+    pred = r.summary()["predicted"]
+    assert pred["rise_time_s"] == pytest.approx(INFO["RiseTime"], rel=0.01)
+    assert pred["overshoot_pct"] == pytest.approx(INFO["Overshoot"], rel=0.01)
+    assert pred["settling_time_s"] == pytest.approx(INFO["SettlingTime"] + r.dead_time_s, rel=0.01)
+    assert pred["peak_time_s"] == pytest.approx(INFO["PeakTime"] + r.dead_time_s, rel=0.01)
+    assert pred["final_change"] == pytest.approx(K * STEP, rel=1e-6)
+    assert analyse_step(t, y, t0_s=T0, step_size=STEP).summary()["predicted"] is None

@@ -1,28 +1,42 @@
 """System identification: sine-dwell fits, frequency response, transfer-function
-fit and step-response analysis.
+fit, order selection and step-response analysis.
 
 Typical use::
 
-    fits = [fit_sine(t, angle_rad, f_hz, t0_s=t0) for ...]
+    fits = [fit_sine(t, angle_rad, f_hz, t0_s=t0) for ...]   # settle_s="auto"
     fr = FrequencyResponse.from_sine_fits(fits, input_amplitudes=0.1, labels=names)
     tf_fit = fit_second_order(fr)                  # paper eq. 5, magnitude only
+    tf_fit = fit_transfer_function(fr, order=(0, 2), mode="complex", bootstrap=200)
+    sel = select_order(fr, mode="complex")         # or order="auto" above
     step = analyse_step(t, angle_rad, t0_s=t0, step_size=0.5,
                         model=tf_fit.transfer_function)
 """
 
 from servoscope.sysid.frequency_response import FrequencyResponse
+from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
 from servoscope.sysid.sine import SineFit, fit_sine
 from servoscope.sysid.step import StepAnalysis, analyse_step, model_step_metrics
-from servoscope.sysid.tf_fit import TransferFunctionFit, bandwidth_rad_s, fit_second_order
+from servoscope.sysid.tf_fit import (
+    TransferFunctionFit,
+    bandwidth_rad_s,
+    cifer_cost,
+    fit_second_order,
+    fit_transfer_function,
+)
 
 __all__ = [
     "FrequencyResponse",
+    "OrderSelection",
     "SineFit",
     "StepAnalysis",
     "TransferFunctionFit",
     "analyse_step",
     "bandwidth_rad_s",
+    "cifer_cost",
+    "estimate_slope_db_per_decade",
     "fit_second_order",
     "fit_sine",
+    "fit_transfer_function",
     "model_step_metrics",
+    "select_order",
 ]

@@ -31,6 +31,8 @@ _COLUMNS = (
     "phase_deg",
     "phase_stderr_deg",
     "fidelity",
+    "thd",
+    "flags",
 )
 
 
@@ -61,6 +63,12 @@ class FrequencyResponse:
         Names of the videos (one per point).
     frequency_stderr_hz : numpy.ndarray
         Standard error of the refined frequency in Hz (NaN where unknown).
+    thd : numpy.ndarray
+        Total harmonic distortion of each dwell (ratio; NaN where unknown).
+    flags : tuple of tuple of str
+        Each dwell's :attr:`SineFit.flags` (empty where unknown).
+    warnings : tuple of str
+        Dwells left out and the dwells' own warnings, prefixed by label.
     """
 
     frequency_hz: NDArray[np.float64]
@@ -71,6 +79,9 @@ class FrequencyResponse:
     fidelity: NDArray[np.float64]
     labels: tuple[str, ...]
     frequency_stderr_hz: NDArray[np.float64] | None = field(default=None)
+    thd: NDArray[np.float64] | None = field(default=None)
+    flags: tuple[tuple[str, ...], ...] | None = field(default=None)
+    warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         f = np.array(self.frequency_hz, dtype=float).ravel()
@@ -90,7 +101,7 @@ class FrequencyResponse:
 
         f.setflags(write=False)
         object.__setattr__(self, "frequency_hz", f)
-        for name in ("gain", "gain_stderr", "phase_deg", "phase_stderr_deg", "fidelity", "frequency_stderr_hz"):
+        for name in ("gain", "gain_stderr", "phase_deg", "phase_stderr_deg", "fidelity", "frequency_stderr_hz", "thd"):
             object.__setattr__(self, name, arr(name, getattr(self, name)))
         labels = tuple(str(x) for x in self.labels) if self.labels is not None else ()
         if not labels:
@@ -98,6 +109,11 @@ class FrequencyResponse:
         if len(labels) != n:
             raise ServoscopeError(f"FrequencyResponse: {len(labels)} labels for {n} points")
         object.__setattr__(self, "labels", labels)
+        flags = tuple(tuple(str(c) for c in fl) for fl in self.flags) if self.flags is not None else ((),) * n
+        if len(flags) != n:
+            raise ServoscopeError(f"FrequencyResponse: {len(flags)} flag sets for {n} points")
+        object.__setattr__(self, "flags", flags)
+        object.__setattr__(self, "warnings", tuple(str(w) for w in self.warnings))
         if np.any(~np.isfinite(f)) or np.any(f <= 0):
             raise ServoscopeError("FrequencyResponse: frequencies must be finite and positive")
 
@@ -105,7 +121,7 @@ class FrequencyResponse:
     @classmethod
     def from_sine_fits(
         cls,
-        fits: Sequence[SineFit],
+        fits: Sequence[SineFit | None],
         input_amplitudes: float | ArrayLike,
         labels: Sequence[str] | None = None,
     ) -> FrequencyResponse:
@@ -113,8 +129,10 @@ class FrequencyResponse:
 
         Parameters
         ----------
-        fits : sequence of SineFit
-            One fit per sine dwell, in any order.
+        fits : sequence of SineFit or None
+            One fit per sine dwell, in any order. None marks a dwell that
+            could not be fitted (e.g. no valid frames): it is left out with
+            a warning in `warnings`.
         input_amplitudes : float or array_like
             Input sine amplitude(s) (input units, > 0); a scalar applies to
             all dwells, otherwise one per fit, in the order of `fits`.
@@ -139,13 +157,23 @@ class FrequencyResponse:
             raise ServoscopeError(
                 f"FrequencyResponse.from_sine_fits: {amp_in.size} input amplitudes for {n} fits"
             )
-        if np.any(~np.isfinite(amp_in)) or np.any(amp_in <= 0):
-            raise ServoscopeError("FrequencyResponse.from_sine_fits: input amplitudes must be positive")
         if labels is None:
             labels = [f"point{i}" for i in range(n)]
         labels = [str(x) for x in labels]
         if len(labels) != n:
             raise ServoscopeError(f"FrequencyResponse.from_sine_fits: {len(labels)} labels for {n} fits")
+        notes: list[str] = [f"{labels[i]}: no sine fit (no valid frames?); dwell left out" for i in range(n) if fits[i] is None]
+        keep = [i for i in range(n) if fits[i] is not None]
+        if not keep:
+            raise ServoscopeError("FrequencyResponse.from_sine_fits: no dwell could be fitted")
+        fits = [fits[i] for i in keep]  # type: ignore[misc]
+        labels = [labels[i] for i in keep]
+        amp_in = np.asarray(amp_in)[keep]
+        n = len(fits)
+        if np.any(~np.isfinite(amp_in)) or np.any(amp_in <= 0):
+            raise ServoscopeError("FrequencyResponse.from_sine_fits: input amplitudes must be positive")
+        for fi, lab in zip(fits, labels):
+            notes.extend(f"{lab}: {w}" for w in fi.warnings)
 
         def nan_if_none(v: float | None) -> float:
             return float("nan") if v is None else float(v)
@@ -158,6 +186,8 @@ class FrequencyResponse:
         phase_se = np.array([nan_if_none(fi.phase_stderr_rad) for fi in fits])
         fid = np.array([nan_if_none(fi.fidelity) for fi in fits])
         f_se = np.array([nan_if_none(fi.frequency_stderr_hz) for fi in fits])
+        thd = np.array([nan_if_none(getattr(fi, "thd", None)) for fi in fits])
+        flags = [tuple(getattr(fi, "flags", ())) for fi in fits]
 
         phase = phase[order]
         known = np.isfinite(phase)
@@ -174,6 +204,9 @@ class FrequencyResponse:
             fidelity=fid[order],
             labels=tuple(labels[i] for i in order),
             frequency_stderr_hz=f_se[order],
+            thd=thd[order],
+            flags=tuple(flags[i] for i in order),
+            warnings=tuple(notes),
         )
 
     # ------------------------------------------------------------- properties
@@ -245,6 +278,9 @@ class FrequencyResponse:
             fidelity=self.fidelity,
             labels=self.labels,
             frequency_stderr_hz=self.frequency_stderr_hz,
+            thd=self.thd,
+            flags=self.flags,
+            warnings=self.warnings,
         )
 
     def _rows(self) -> list[dict[str, Any]]:
@@ -259,11 +295,13 @@ class FrequencyResponse:
             "phase_deg": self.phase_deg,
             "phase_stderr_deg": self.phase_stderr_deg,
             "fidelity": self.fidelity,
+            "thd": self.thd,
         }
         rows = []
         for i, label in enumerate(self.labels):
             row: dict[str, Any] = {"video": label}
             row.update({k: float(v[i]) for k, v in cols.items()})
+            row["flags"] = " ".join(self.flags[i])
             rows.append(row)
         return rows
 
@@ -272,7 +310,7 @@ class FrequencyResponse:
 
         Keys: video, frequency_hz, frequency_stderr_hz, omega_rad_s, gain,
         gain_stderr, gain_db, gain_db_stderr, phase_deg, phase_stderr_deg,
-        fidelity.
+        fidelity, thd, flags (space-separated codes).
         """
         return [_jsonable(r) for r in self._rows()]
 

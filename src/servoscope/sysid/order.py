@@ -11,7 +11,10 @@ them by an information criterion and CIFER's cost J:
    measured below the asymptote is shallower than the asymptote, so this
    estimate is a lower bound and is reported, not imposed.
 2. *Candidates*: every ``0 <= nb < na <= max_order`` that the data can
-   determine with at least one degree of freedom left.
+   determine with at least one degree of freedom left, by increasing
+   ``nb`` for each ``na``; once a candidate has a parameter the data do not
+   determine, more zeros for the same ``na`` are not tried (they only add
+   freedom; this saves most of the time spent on hopeless fits).
 3. *Choice*: candidates with a parameter the data do not determine
    (relative standard error > 100 %, a pole or zero far outside the band:
    over-parameterized, typically a near pole-zero cancellation) are
@@ -241,7 +244,11 @@ def select_order(
     warns: list[str] = []
     fits: dict[tuple[int, int], TransferFunctionFit] = {}
     first_problem = None
-    for nb, na in candidates:
+    hopeless: set[int] = set()  # na values whose fits already had undetermined parameters
+    for nb, na in sorted((int(a), int(b)) for a, b in candidates):
+        if na in hopeless:
+            warns.append(f"order ({nb}, {na}) not tried: ({nb - 1}, {na}) or fewer zeros were already over-parameterized")
+            continue
         st = Structure(int(nb), int(na), zeros, mode == "complex", 1.0)
         problem = _identifiability_problem(d, st, mode)
         if problem is None and st.n_params >= m:
@@ -250,7 +257,10 @@ def select_order(
             first_problem = first_problem or problem
             warns.append(f"order ({nb}, {na}) not tried: {problem}")
             continue
-        fits[(int(nb), int(na))] = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros)
+        fit = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros)
+        fits[(nb, na)] = fit
+        if fit.undetermined:
+            hopeless.add(na)
     if not fits:
         raise ServoscopeError(f"select_order: no candidate order can be fitted: {first_problem}")
 

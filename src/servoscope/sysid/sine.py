@@ -17,6 +17,31 @@ frequency is then freed and ``(offset, a, b, f)`` are refined with
 covariance scaled by the residual variance; the phase relative to ``t0`` is
 obtained from the phase at ``tc`` by the delta method, so its standard error
 includes the frequency uncertainty times the lever arm ``tc - t0``.
+
+Steady-state window (``settle_s="auto"``)
+-----------------------------------------
+A reference model (offset, fundamental with a linear phase drift, 2nd and
+3rd harmonics) is fitted to the second half of the record after ``t0`` and
+subtracted from all of it. The transient (and the dead time, during which
+the output has not moved yet) shows up as a residual well above the
+second half's noise: the window starts at the end of the last sliding
+window (8 samples) whose RMS residual exceeds 3 times that noise (noise
+floored at 1e-4 of the amplitude). The same test, run with a numeric ``settle_s``, warns
+when a transient is still visible after it.
+
+Sinusoidal fidelity and harmonics
+---------------------------------
+``fidelity`` is the share of the window's AC power in the fitted
+fundamental (the paper's check, its Fig. 8: a flattened sine leaves a
+periodic residual). Harmonics 2 to 5 (those below 95 % of the Nyquist
+frequency of the samples) are fitted jointly with the fundamental by
+linear least squares at the fitted frequency; ``thd`` is
+``sqrt(sum A_k**2) / A_1``. ``flags`` names the problems found:
+``low_fidelity`` (< 0.95), ``distorted`` (THD > 1 % and the harmonics
+significant at the 0.1 % level), ``aliasing`` (frequency at or above 80 %
+of the Nyquist frequency), ``frequency_mismatch``, ``few_periods`` (< 2),
+``few_samples`` (< 20), ``invalid_frames`` (> 20 % of the frames in the
+window invalid), ``transient`` (not over within the window), ``flat``.
 """
 
 from __future__ import annotations
@@ -28,6 +53,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as chi2_dist
 
 from servoscope.errors import ServoscopeError
 
@@ -36,6 +62,20 @@ __all__ = ["SineFit", "fit_sine"]
 _MIN_SAMPLES = 5
 _FEW_SAMPLES = 20
 _FEW_PERIODS = 2.0
+#: Fidelity below this flags a dwell as "low_fidelity".
+LOW_FIDELITY = 0.95
+#: THD above this (with significant harmonics) flags a dwell as "distorted".
+#: A servo's own low-pass attenuates the harmonics its nonlinearity makes
+#: (a rate-limited triangle has 12 % THD, ~2 % after the paper's servo at
+#: 5 Hz), so the threshold is low; the significance test keeps noise from
+#: tripping it.
+HIGH_THD = 0.01
+#: Share of invalid frames in the window above which a dwell is flagged.
+MAX_INVALID_FRACTION = 0.2
+#: Frequencies at or above this fraction of the Nyquist frequency are flagged.
+NEAR_NYQUIST = 0.8
+_HARMONICS = (2, 3, 4, 5)
+_TRANSIENT_SIGMAS = 3.0
 
 
 def _jsonable(value: Any) -> Any:
@@ -130,6 +170,24 @@ class SineFit:
     warnings : tuple of str
         Non-fatal problems (short window, few samples, energy not at the
         commanded frequency, ...).
+    settle_s : float
+        Time skipped after ``t0_s`` (or the first sample), in s: the value
+        given, or the one detected with ``settle_s="auto"``.
+    harmonic_amplitudes : tuple of (float or None)
+        Amplitudes of harmonics 2..5 (output units); None for those at or
+        above 95 % of the Nyquist frequency (not fitted).
+    harmonic_amplitude_stderrs : tuple of (float or None)
+        Their standard errors.
+    thd : float
+        Total harmonic distortion ``sqrt(sum A_k**2)/amplitude`` over the
+        fitted harmonics (NaN when none could be fitted).
+    harmonic_residual_rms : float
+        RMS residual after removing the fundamental and the harmonics
+        (the noise floor), output units.
+    invalid_fraction : float
+        Share of the frames inside the window that were invalid or NaN.
+    flags : tuple of str
+        Short codes of the problems found (see the module docstring).
     time_s, y, residual : numpy.ndarray
         The window's sample times (s), samples and residuals ``y - model``.
     covariance : numpy.ndarray
@@ -157,6 +215,13 @@ class SineFit:
     y: NDArray[np.float64] = field(repr=False, compare=False)
     residual: NDArray[np.float64] = field(repr=False, compare=False)
     covariance: NDArray[np.float64] = field(repr=False, compare=False)
+    settle_s: float = float("nan")
+    harmonic_amplitudes: tuple[float | None, ...] = ()
+    harmonic_amplitude_stderrs: tuple[float | None, ...] = ()
+    thd: float = float("nan")
+    harmonic_residual_rms: float = float("nan")
+    invalid_fraction: float = 0.0
+    flags: tuple[str, ...] = ()
     _center_s: float = field(repr=False, compare=False, default=0.0)
     _cos_coef: float = field(repr=False, compare=False, default=0.0)
     _sin_coef: float = field(repr=False, compare=False, default=0.0)
@@ -206,6 +271,12 @@ class SineFit:
                 "n_samples": self.n_samples,
                 "window_s": list(self.window_s),
                 "t0_s": self.t0_s,
+                "settle_s": self.settle_s,
+                "harmonic_amplitudes": list(self.harmonic_amplitudes),
+                "thd": self.thd,
+                "harmonic_residual_rms": self.harmonic_residual_rms,
+                "invalid_fraction": self.invalid_fraction,
+                "flags": list(self.flags),
                 "warnings": list(self.warnings),
             }
         )
@@ -262,13 +333,114 @@ def _fit_power(t: NDArray[np.float64], y: NDArray[np.float64], freqs: NDArray[np
     return out
 
 
+def _steady_state_start(
+    t: NDArray[np.float64], y: NDArray[np.float64], freq_hz: float, t_from: float
+) -> tuple[float, bool]:
+    """Start of the steady state after ``t_from`` (see the module docstring).
+
+    Returns
+    -------
+    start_s : float
+        First time of the steady state, s (``t_from`` when no transient is
+        seen or the record is too short to tell).
+    too_long : bool
+        True when the transient seems to last beyond half the record (the
+        start is then clamped to the middle of the record).
+    """
+    sel = t >= t_from
+    ts, ys = t[sel], y[sel]
+    if ts.size < 24:
+        return t_from, False
+    span = float(ts[-1] - ts[0])
+    dt = float(np.median(np.diff(ts)))
+    if not (span > 0 and dt > 0):
+        return t_from, False
+    mid = float(ts[0]) + 0.5 * span
+    late = ts >= mid
+    tc = float(np.mean(ts[late]))
+    th = 2.0 * math.pi * freq_hz * (ts - tc)
+    cols = [np.ones_like(ts), np.cos(th), np.sin(th), (ts - tc) * np.cos(th), (ts - tc) * np.sin(th)]
+    for k in (2, 3):
+        if k * freq_hz < 0.45 / dt:
+            cols += [np.cos(k * th), np.sin(k * th)]
+    X = np.column_stack(cols)
+    n_late, p = int(np.count_nonzero(late)), X.shape[1]
+    if n_late < p + 4:
+        return t_from, False
+    coef, *_ = np.linalg.lstsq(X[late], ys[late], rcond=None)
+    r = ys - X @ coef
+    amp = math.hypot(float(coef[1]), float(coef[2]))
+    # Noise of the late half; floored at -80 dB of the sine so that
+    # noise-free data do not wait for the transient to reach round-off.
+    sigma = math.sqrt(float(r[late] @ r[late]) / (n_late - p))
+    sigma = max(sigma, 1e-4 * amp, 1e-300)
+    # Short windows (8 samples) locate the end of the transient to within a
+    # few frames whatever the period; 8 samples keep the RMS test's false
+    # alarm rate (3 sigma) below 1e-8 per window.
+    width = min(8.0 * dt, 0.25 * span)
+    end_idx = np.searchsorted(ts, ts + width, side="left")
+    csum = np.concatenate([[0.0], np.cumsum(r**2)])
+    idx = np.arange(ts.size)
+    count = end_idx - idx
+    ok = (count >= 4) & (ts < mid)
+    rms = np.zeros(ts.size)
+    rms[ok] = np.sqrt((csum[end_idx[ok]] - csum[idx[ok]]) / count[ok])
+    exceed = np.nonzero(ok & (rms > _TRANSIENT_SIGMAS * sigma))[0]
+    if exceed.size == 0:
+        return t_from, False
+    start = float(ts[exceed[-1]]) + width
+    if start >= mid:
+        return mid, True
+    return max(start, t_from), False
+
+
+def _harmonics(
+    t: NDArray[np.float64], y: NDArray[np.float64], freq_hz: float, tc: float, dt_s: float
+) -> tuple[list[float | None], list[float | None], float, float]:
+    """Amplitudes (and stderrs) of harmonics 2..5, the chi-square of their
+    significance per degree of freedom's p-value, and the residual RMS."""
+    th = 2.0 * math.pi * freq_hz * (t - tc)
+    ks = [k for k in _HARMONICS if dt_s > 0 and k * freq_hz < 0.95 * 0.5 / dt_s]
+    cols = [np.ones_like(t), np.cos(th), np.sin(th)]
+    for k in ks:
+        cols += [np.cos(k * th), np.sin(k * th)]
+    X = np.column_stack(cols)
+    n, p = X.shape
+    amps: list[float | None] = [None] * len(_HARMONICS)
+    ses: list[float | None] = [None] * len(_HARMONICS)
+    if n <= p:
+        return amps, ses, float("nan"), float("nan")
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    s2 = float(r @ r) / (n - p)
+    try:
+        cov = np.linalg.inv(X.T @ X) * s2
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(X.T @ X) * s2
+    chi2 = 0.0
+    for j, k in enumerate(ks):
+        a, b = float(coef[3 + 2 * j]), float(coef[4 + 2 * j])
+        sub = cov[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j]
+        amp = math.hypot(a, b)
+        g = np.array([a, b]) / amp if amp > 0 else np.array([math.sqrt(0.5), math.sqrt(0.5)])
+        amps[_HARMONICS.index(k)] = amp
+        ses[_HARMONICS.index(k)] = math.sqrt(max(float(g @ sub @ g), 0.0))
+        try:
+            v = np.array([a, b])
+            chi2 += float(v @ np.linalg.solve(sub, v)) if s2 > 0 else math.inf
+        except np.linalg.LinAlgError:
+            pass
+    p_value = float(chi2_dist.sf(chi2, 2 * len(ks))) if ks else float("nan")
+    return amps, ses, p_value, math.sqrt(float(r @ r) / n)
+
+
 def fit_sine(
     time_s: ArrayLike,
     y: ArrayLike,
     frequency_hz: float,
     *,
     t0_s: float | None = None,
-    settle_s: float = 0.5,
+    settle_s: float | str = "auto",
     valid: ArrayLike | None = None,
     refine_frequency: bool | str = "auto",
     t0_stderr_s: float | None = None,
@@ -285,9 +457,11 @@ def fit_sine(
         Commanded input frequency in Hz (> 0).
     t0_s : float, optional
         Input start time in s (LED off). Needed for the phase.
-    settle_s : float, default 0.5
+    settle_s : float or "auto", default "auto"
         Time in s skipped after ``t0_s`` (or after the first sample when
-        ``t0_s`` is None) to let the transient die out.
+        ``t0_s`` is None) to let the transient die out; "auto" detects the
+        end of the transient from the data (module docstring). With a
+        number, a transient still visible after it is warned about.
     valid : array_like of bool, shape (n,), optional
         False marks frames to exclude.
     refine_frequency : {"auto", True, False}, default "auto"
@@ -320,7 +494,10 @@ def fit_sine(
     f_cmd = float(frequency_hz)
     if not (math.isfinite(f_cmd) and f_cmd > 0):
         raise ServoscopeError(f"fit_sine: frequency_hz must be positive, got {frequency_hz!r}")
-    if not (math.isfinite(settle_s) and settle_s >= 0):
+    auto_settle = isinstance(settle_s, str)
+    if auto_settle and settle_s != "auto":
+        raise ServoscopeError(f"fit_sine: settle_s must be a number >= 0 or 'auto', got {settle_s!r}")
+    if not auto_settle and not (math.isfinite(float(settle_s)) and float(settle_s) >= 0):
         raise ServoscopeError(f"fit_sine: settle_s must be >= 0, got {settle_s!r}")
     if t0_s is not None and not math.isfinite(float(t0_s)):
         raise ServoscopeError(f"fit_sine: t0_s must be finite, got {t0_s!r}")
@@ -334,8 +511,33 @@ def fit_sine(
         mask &= v
     if not np.any(np.isfinite(t_all)):
         raise ServoscopeError("fit_sine: no finite sample times")
-    start = (float(t0_s) if t0_s is not None else float(np.nanmin(t_all))) + float(settle_s)
+    if not np.any(mask):
+        raise ServoscopeError("fit_sine: no valid frames (every sample is invalid or NaN)")
+    origin = float(t0_s) if t0_s is not None else float(np.nanmin(t_all))
+    warnings: list[str] = []
+    flags: list[str] = []
+    o_all = np.argsort(t_all[mask], kind="stable")
+    t_ok, y_ok = t_all[mask][o_all], y_all[mask][o_all]
+    detected, too_long = _steady_state_start(t_ok, y_ok, f_cmd, origin)
+    if auto_settle:
+        start = detected
+    else:
+        start = origin + float(settle_s)
+        step = float(np.median(np.diff(t_ok))) if t_ok.size > 1 else 0.0
+        if detected > start + step:
+            warnings.append(
+                f"a transient is still visible {detected - origin:.3g} s after the input start, "
+                f"beyond settle_s = {float(settle_s):g} s; consider settle_s='auto'"
+            )
+            flags.append("transient")
+    if too_long:
+        warnings.append("the transient seems to last beyond half the record: record a longer dwell")
+        flags.append("transient")
+    settle_used = start - origin
+    in_window = np.isfinite(t_all) & (t_all >= start)
     mask &= t_all >= start
+    n_frames = int(np.count_nonzero(in_window))
+    invalid_fraction = 1.0 - np.count_nonzero(mask) / n_frames if n_frames else 1.0
     order = np.argsort(t_all[mask], kind="stable")
     t = t_all[mask][order]
     yw = y_all[mask][order]
@@ -345,22 +547,35 @@ def fit_sine(
             f"fit_sine: only {n} usable samples after t = {start:.4g} s "
             f"(need at least {_MIN_SAMPLES}); record longer or reduce settle_s"
         )
-
-    warnings: list[str] = []
+    if invalid_fraction > MAX_INVALID_FRACTION:
+        warnings.append(
+            f"{100 * invalid_fraction:.0f} % of the frames in the steady-state window are invalid "
+            f"(> {100 * MAX_INVALID_FRACTION:g} %)"
+        )
+        flags.append("invalid_frames")
     span = float(t[-1] - t[0])
     n_periods = span * f_cmd
     if n < _FEW_SAMPLES:
         warnings.append(f"only {n} samples in the steady-state window (< {_FEW_SAMPLES})")
+        flags.append("few_samples")
     if n_periods < _FEW_PERIODS:
         warnings.append(
             f"steady-state window covers only {n_periods:.2f} periods (< {_FEW_PERIODS:g})"
         )
+        flags.append("few_periods")
     dt_med = float(np.median(np.diff(t))) if n > 1 else float("nan")
     if dt_med > 0 and f_cmd >= 0.5 / dt_med:
         warnings.append(
             f"commanded frequency {f_cmd:g} Hz is at or above the Nyquist frequency "
             f"{0.5 / dt_med:g} Hz of the samples"
         )
+        flags.append("aliasing")
+    elif dt_med > 0 and f_cmd >= NEAR_NYQUIST * 0.5 / dt_med:
+        warnings.append(
+            f"commanded frequency {f_cmd:g} Hz is close to the Nyquist frequency "
+            f"{0.5 / dt_med:g} Hz of the samples: aliasing risk, few samples per period"
+        )
+        flags.append("aliasing")
 
     tc = float(np.mean(t))
     yc = yw - yw.mean()
@@ -370,6 +585,7 @@ def fit_sine(
     if flat:
         sst = 0.0
         warnings.append("no AC signal in the steady-state window (constant output)")
+        flags.append("flat")
 
     # Linear fit at the commanded frequency.
     X = _design(t, f_cmd, tc)
@@ -392,6 +608,7 @@ def fit_sine(
                     f"periodogram peak at {grid[k]:.4g} Hz, not at the commanded "
                     f"{f_cmd:.4g} Hz (power there is {p_cmd / power[k]:.2g} of the peak)"
                 )
+                flags.append("frequency_mismatch")
 
     if refine_frequency not in (True, False, "auto"):
         raise ServoscopeError(f"fit_sine: refine_frequency must be True, False or 'auto', got {refine_frequency!r}")
@@ -436,6 +653,7 @@ def fit_sine(
                         f"refined frequency {params[3]:.4g} Hz is far from the commanded "
                         f"{f_cmd:.4g} Hz"
                     )
+                    flags.append("frequency_mismatch")
         Jm = jac(params)[:, :p_names]
     else:
         Jm = _design(t, f_cmd, tc)
@@ -485,6 +703,21 @@ def fit_sine(
 
     fidelity = 1.0 - ssr / sst if sst > 0 else float("nan")
     ref = float(t0_s) if t0_s is not None else float(t[0])
+    h_amps, h_ses, h_p, h_rms = _harmonics(t, yw, f_hat, tc, dt_med)
+    fitted = [a for a in h_amps if a is not None]
+    thd = math.sqrt(sum(a * a for a in fitted)) / amp if fitted and amp > 0 else float("nan")
+    if math.isfinite(fidelity) and fidelity < LOW_FIDELITY:
+        warnings.append(
+            f"low sinusoidal fidelity {fidelity:.3f} (< {LOW_FIDELITY:g}): the output is not a clean sine "
+            "(nonlinearity or noise)"
+        )
+        flags.append("low_fidelity")
+    if math.isfinite(thd) and thd > HIGH_THD and h_p < 1e-3:
+        warnings.append(
+            f"harmonic distortion {100 * thd:.1f} % (> {100 * HIGH_THD:g} %): nonlinear response "
+            "(rate limit, backlash, saturation?)"
+        )
+        flags.append("distorted")
 
     return SineFit(
         frequency_hz=f_hat,
@@ -503,6 +736,13 @@ def fit_sine(
         t0_s=None if t0_s is None else float(t0_s),
         reference_time_s=ref,
         warnings=tuple(warnings),
+        settle_s=float(settle_used),
+        harmonic_amplitudes=tuple(h_amps),
+        harmonic_amplitude_stderrs=tuple(h_ses),
+        thd=float(thd),
+        harmonic_residual_rms=float(h_rms),
+        invalid_fraction=float(invalid_fraction),
+        flags=tuple(dict.fromkeys(flags)),
         time_s=_readonly(t),
         y=_readonly(yw),
         residual=_readonly(residual),

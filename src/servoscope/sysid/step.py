@@ -100,6 +100,10 @@ class StepAnalysis:
         Non-fatal problems.
     time_s, y : numpy.ndarray
         Valid samples used (s, output units).
+    predicted_metrics : dict or None
+        The model's own step metrics (:func:`model_step_metrics` with the
+        fitted dead time, scaled to this step), for comparison with the
+        measured ones; None without a model.
     """
 
     t0_s: float
@@ -125,6 +129,7 @@ class StepAnalysis:
     _unit_step: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = field(
         default=None, repr=False, compare=False
     )
+    predicted_metrics: dict[str, float] | None = field(default=None, compare=False)
 
     def predicted(self, time_s: ArrayLike) -> NDArray[np.float64]:
         """Model prediction ``b + g*step_size*s(t - t0 - tau)`` at `time_s`.
@@ -161,7 +166,12 @@ class StepAnalysis:
         return self.y[sel] - self.predicted(self.time_s[sel])
 
     def summary(self) -> dict[str, Any]:
-        """Scalar results as a JSON-serializable dict (NaN -> None)."""
+        """Scalar results as a JSON-serializable dict (NaN -> None).
+
+        Includes ``predicted``: the model's metrics (rise_time_s,
+        overshoot_pct, settling_time_s, peak_time_s from t0 with the fitted
+        dead time, final_change = model DC gain * step) or None.
+        """
         return _jsonable(
             {
                 "rise_time_s": self.rise_time_s,
@@ -179,6 +189,7 @@ class StepAnalysis:
                 "noise_sigma": self.noise_sigma,
                 "t0_s": self.t0_s,
                 "step_size": self.step_size,
+                "predicted": None if self.predicted_metrics is None else dict(self.predicted_metrics),
                 "warnings": list(self.warnings),
             }
         )
@@ -403,6 +414,7 @@ def analyse_step(
 
     dead = dead_se = g_fit = g_se = b_fit = None
     unit_step = None
+    predicted_metrics: dict[str, float] | None = None
     if model is not None:
         dts = np.diff(t)
         dt_hint = float(np.median(dts)) if dts.size else 0.01
@@ -459,6 +471,17 @@ def analyse_step(
         g_se = float(math.sqrt(max(cov[1, 1], 0.0)))
         if dead <= 0.0:
             warns.append("fitted dead time is at its lower bound 0")
+        try:
+            pm = model_step_metrics(model, dead_time_s=dead)
+            predicted_metrics = {
+                "rise_time_s": pm["rise_time_s"],
+                "overshoot_pct": pm["overshoot_pct"],
+                "settling_time_s": pm["settling_time_s"],
+                "peak_time_s": pm["peak_time_s"],
+                "final_change": pm["steady_state_value"] * step,
+            }
+        except (ServoscopeError, ValueError, ZeroDivisionError) as exc:
+            warns.append(f"model step metrics unavailable: {exc}")
 
     return StepAnalysis(
         t0_s=t0,
@@ -482,6 +505,7 @@ def analyse_step(
         time_s=_readonly(t),
         y=_readonly(yv),
         _unit_step=unit_step,
+        predicted_metrics=predicted_metrics,
     )
 
 
