@@ -2,7 +2,8 @@
 
 Run:  .venv/bin/python benchmarks/tracking_accuracy.py [--out DIR] [--quick]
 
-Prints, per scenario, the angle error RMS vs. the renderer's truth (deg),
+Tracks with the default engine (the YUV kernel; set TRACKING_ENGINE=reference-rgb in
+the environment to measure the previous RGB path). Prints, per scenario, the angle error RMS vs. the renderer's truth (deg),
 the same for the OpenCV baseline (HSV inRange → cv2.moments → atan2,
 centroids undistorted with the same camera model, so only the tracking
 differs), the centroid error RMS (px) over the valid frames, the LED switch
@@ -12,6 +13,7 @@ time error (ms) and the valid-frame count. Deterministic (fixed seeds).
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import math
 import sys
@@ -29,6 +31,9 @@ from servoscope.simulate.clips import Occluder, render_clip
 from servoscope.video.reader import iter_frames
 
 __all__ = ["opencv_baseline_angles", "main"]
+
+#: Tracking engine measured (see TrackerSettings.engine).
+ENGINE = os.environ.get("TRACKING_ENGINE", "auto")
 
 
 def _hue(colour_rgb: tuple[float, float, float]) -> int:
@@ -104,7 +109,8 @@ def campaign_scenario(out: Path, name: str, seed: int = 3, **overrides) -> dict:
     sigma_pred = []
     for test in truth["tests"]:
         video = toml.parent / test["video"]
-        tr = track_video(video, TrackerSettings(mk["lead"], mk["trail"], mk["led"], camera, truth["video"]["exposure_s"]))
+        tr = track_video(video, TrackerSettings(mk["lead"], mk["trail"], mk["led"], camera, truth["video"]["exposure_s"],
+                                                    engine=ENGINE))
         e = _errors(tr, test)
         ang.append(e["angle_deg"])
         cen.append(e["centroid_px"])
@@ -133,7 +139,7 @@ def occlusion_scenario(out: Path) -> dict:
     # 26 px sticker (partly or wholly) for about (40 + 26) / 6 ≈ 12 frames.
     bar = Occluder("#30261f", (trail0[1] - 40.0, trail0[1] + 40.0), 40.0, trail0[0] - 380.0, trail0[0] + 300.0)
     truth = render_clip(out / "occluded.mp4", scene, pitch, occluder=bar, noise_seed=11)
-    tr = track_video(out / "occluded.mp4", TrackerSettings(led=None))
+    tr = track_video(out / "occluded.mp4", TrackerSettings(led=None, engine=ENGINE))
     hidden = truth["trail_hidden"] > 0
     e = _errors(tr, truth)
     return {"scenario": "occluded trail (H.264)", "angle_rms_deg": _rms(e["angle_deg"]),
@@ -153,7 +159,7 @@ def colour_scenario(out: Path, name: str, lead: str, trail: str, *, width: int =
     suffix = ".mp4" if codec == "h264" else ".avi"
     path = out / ("".join(ch if ch.isalnum() else "_" for ch in name) + suffix)
     truth = render_clip(path, scene, pitch, fps=fps, codec=codec, noise_seed=7)
-    tr = track_video(path, TrackerSettings(lead, trail, led))
+    tr = track_video(path, TrackerSettings(lead, trail, led, engine=ENGINE))
     e = _errors(tr, truth)
     b, _, _ = opencv_baseline_angles(path, lead, trail)
     base = np.degrees(np.angle(np.exp(1j * (b - truth["angle_rad"]))))

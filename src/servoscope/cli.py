@@ -180,6 +180,10 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help="Folder for result.json, report.html, tracks/.")
 @click.option("--fit", "fit_mode", type=click.Choice(["auto", "magnitude", "complex"]), default="auto", show_default=True,
               help="magnitude: |G| only (the paper's); complex: magnitude and phase with a dead time; auto: complex when every dwell's input start is known.")
+@click.option("--order", "order_text", default="2", show_default=True,
+              help="Model order: NA (denominator degree, no zeros), NB,NA (nb < na ≤ 4), or 'auto' (chosen from the data).")
+@click.option("--bootstrap", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Also give 95 %% intervals from this many bootstrap resamplings of the dwells.")
 @click.option("--keep-going", is_flag=True, help="Leave out videos that cannot be read or tracked (with a warning) and identify from the rest.")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(min=0),
               help="Videos tracked in parallel by a local Dask cluster of this many processes; 0 = one per core.")
@@ -187,12 +191,13 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @click.option("--force", is_flag=True, help="Track again even where a cached track exists (tracks are cached in OUT/.cache).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
-def identify(campaign: Path, out_dir: Path, fit_mode: str, keep_going: bool, workers: int, scheduler: str | None,
-             force: bool, quiet: bool, as_json: bool) -> None:
+def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
+             workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
 
+    order = _parse_order(order_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
     _check_out_dir(out_dir, manifest)
     failures: dict[str, str] = {}
@@ -203,13 +208,29 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, keep_going: bool, wor
         )
     if failures:
         manifest = manifest.without(failures)
-    result = run_identify(manifest, tracks=tracks, fit=fit_mode, keep_going=keep_going)
+    result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going)
     paths = result.write(out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     elif not quiet:
         _print_model(result)
         click.echo(f"report: {paths['report']}")
+
+
+def _parse_order(text: str):
+    """'auto', 'NA' or 'NB,NA' → "auto" or (nb, na), checked."""
+    text = text.strip().lower()
+    if text == "auto":
+        return "auto"
+    try:
+        parts = [int(p) for p in text.replace(" ", "").split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) == 1:
+        parts = [0, parts[0]]
+    if len(parts) != 2 or not (0 <= parts[0] < parts[1] <= 4):
+        raise ServoscopeError(f"--order {text!r}: use 'auto', NA (1–4) or NB,NA with 0 ≤ NB < NA ≤ 4")
+    return tuple(parts)
 
 
 def _check_out_dir(out_dir: Path, manifest) -> None:
@@ -228,25 +249,38 @@ def _print_model(result, truth: dict | None = None) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from .report.build import _PARAM_LABELS, model_equation
+
     m = result.model
-    table = Table(title="Identified model: G(s) = K·ωn² / (s² + 2ζωn·s + ωn²) · e^(−sτ)")
+    table = Table(title=model_equation(m, result.dead_time_s))
     table.add_column("quantity")
     table.add_column("identified", justify="right")
     table.add_column("± std. error", justify="right")
+    table.add_column("95 % interval", justify="right")
     if truth is not None:
         table.add_column("truth", justify="right")
         table.add_column("error", justify="right")
+    truth_model = (truth or {}).get("model", {})
+    rows = []
+    for name in m.param_names:
+        if name == "dead_time_s":
+            continue  # shown below, with the step test's estimate
+        ci = m.ci95.get(name)
+        rows.append((name, m.params.get(name), m.stderr.get(name), ci, truth_model.get(name), "rel"))
+    rows.append(("−3 dB bandwidth (rad/s)", m.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"), "rel"))
     dead = result.dead_time_s
     step = result.step
-    rows = [
-        ("gain K", m.gain, m.gain_stderr, truth and truth["model"]["gain"], "rel"),
-        ("natural frequency ωn (rad/s)", m.natural_frequency_rad_s, m.natural_frequency_stderr_rad_s, truth and truth["model"]["natural_frequency_rad_s"], "rel"),
-        ("damping ratio ζ", m.damping_ratio, m.damping_ratio_stderr, truth and truth["model"]["damping_ratio"], "rel"),
-        ("bandwidth (rad/s)", m.bandwidth_rad_s, None, truth and truth["bandwidth_rad_s"], "rel"),
-        ("dead time τ (ms)", None if dead is None else 1e3 * dead, None if step is None or step.dead_time_stderr_s is None else 1e3 * step.dead_time_stderr_s, truth and 1e3 * truth["model"]["dead_time_s"], "abs"),
-    ]
-    for name, value, err, true, kind in rows:
-        cells = [name, _fmt(value), _fmt(err)]
+    dead_ms = None if dead is None else 1e3 * dead
+    dead_err = None
+    if result.dead_time_source == "step test" and step is not None and step.dead_time_stderr_s is not None:
+        dead_err = 1e3 * step.dead_time_stderr_s
+    elif m.dead_time_stderr_s is not None:
+        dead_err = 1e3 * m.dead_time_stderr_s
+    true_dead = truth_model.get("dead_time_s")
+    rows.append((f"dead time (ms), {result.dead_time_source or 'not measured'}", dead_ms, dead_err, None,
+                 None if true_dead is None else 1e3 * true_dead, "abs"))
+    for name, value, err, ci, true, kind in rows:
+        cells = [_PARAM_LABELS.get(name, name), _fmt(value), _fmt(err), "—" if ci is None else f"[{ci[0]:.4g}, {ci[1]:.4g}]"]
         if truth is not None:
             if value is None or true is None:
                 diff = "—"
@@ -256,7 +290,7 @@ def _print_model(result, truth: dict | None = None) -> None:
                 diff = f"{value - true:+.2f} ms"
             cells += [_fmt(true), diff]
         table.add_row(*cells)
-    Console(highlight=False).print(table)
+    Console(highlight=False, width=max(100, 20)).print(table)
 
 
 def _fmt(value) -> str:
@@ -308,10 +342,12 @@ def calibrate(inputs: tuple[Path, ...], board: str, square_size: float, out_json
 
 
 def _register_rig() -> None:
+    from .bench import bench
     from .rig.cli import drive, plan
 
     cli.add_command(plan)
     cli.add_command(drive)
+    cli.add_command(bench)
 
 
 _register_rig()

@@ -23,8 +23,8 @@ from ..sysid import (
     StepAnalysis,
     TransferFunctionFit,
     analyse_step,
-    fit_second_order,
     fit_sine,
+    fit_transfer_function,
 )
 from .manifest import Campaign, TestSpec, load_campaign
 
@@ -222,19 +222,25 @@ class IdentificationResult:
         paths["frequency_response"] = out / "frequency_response.csv"
         _write_via_tmp(paths["frequency_response"], self.frequency_response.to_csv)
         paths["report"] = out / "report.html"
-        write_text_atomic(paths["report"], build_report(self))
+        paths["figures"] = out / "figures"
+        write_text_atomic(paths["report"], build_report(self, figures_dir=paths["figures"]))
         # result.json last: its presence says the run finished.
         paths["result"] = out / "result.json"
         write_json_atomic(paths["result"], self.summary())
         return paths
 
     def _repr_html_(self) -> str:
-        m = self.model
-        dt = "—" if self.dead_time_s is None else f"{1e3 * self.dead_time_s:.1f} ms"
+        from ..report.build import model_equation
+
+        rows = "".join(
+            f"<tr><td>{name}</td><td>{self.model.params.get(name, float('nan')):.5g}</td>"
+            f"<td>{self.model.stderr.get(name, float('nan')):.2g}</td></tr>"
+            for name in self.model.param_names
+        )
+        bw = self.model.bandwidth_rad_s
         return (
-            "<table><tr><th>K</th><th>ωn (rad/s)</th><th>ζ</th><th>bandwidth (rad/s)</th><th>dead time</th></tr>"
-            f"<tr><td>{m.gain:.4g}</td><td>{m.natural_frequency_rad_s:.4g}</td><td>{m.damping_ratio:.3g}</td>"
-            f"<td>{m.bandwidth_rad_s:.4g}</td><td>{dt}</td></tr></table>"
+            f"<p>{model_equation(self.model, self.dead_time_s)}; bandwidth {bw:.4g} rad/s</p>"
+            f"<table><tr><th>parameter</th><th>value</th><th>std. error</th></tr>{rows}</table>"
         )
 
 
@@ -255,6 +261,8 @@ def identify(
     *,
     tracks: dict[str, Track] | None = None,
     fit: str = "auto",
+    order: tuple[int, int] | str = (0, 2),
+    bootstrap: int = 0,
     keep_going: bool = False,
     progress: ProgressFn | None = None,
     **track_options,
@@ -271,6 +279,13 @@ def identify(
         dwells); "complex" fits magnitude and phase with a dead time, which
         needs every dwell's input start (LED or t0_s); "auto" picks complex
         when the phases are known.
+    order : (nb, na) or "auto"
+        Numerator and denominator degrees (nb < na ≤ 4); (0, 2) is the
+        paper's 2nd-order model; "auto" selects the order from the data
+        (asymptotic slope, AIC/BIC, CIFER's J).
+    bootstrap : int
+        Also compute 95 % intervals by refitting on this many resamplings of
+        the dwells (0: intervals from the Jacobian only).
     keep_going : bool
         Leave out a video that cannot be tracked (with a warning) and identify
         from the rest.
@@ -336,8 +351,9 @@ def identify(
             f"{campaign.path}: a complex fit needs every dwell's input start (an LED or t0_s); use --fit magnitude"
         )
     mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
-    model = fit_second_order(fr, mode=mode)
-    warnings.extend(model.warnings)
+    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0)
+    warnings.extend(fr.warnings)
+    warnings.extend(w for w in model.warnings if w not in warnings)
 
     step = None
     step_label = None

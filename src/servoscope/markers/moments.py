@@ -6,6 +6,7 @@ The paper's ``I(x, y)`` is a binary flag; here it may be any weight in [0, 1]
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,8 +39,8 @@ class Moments:
     def axes_px(self) -> tuple[float, float]:
         """Standard deviations along the major and minor axes (px)."""
         common = 0.5 * (self.mu20 + self.mu02)
-        diff = np.hypot(0.5 * (self.mu20 - self.mu02), self.mu11)
-        return float(np.sqrt(max(common + diff, 0.0))), float(np.sqrt(max(common - diff, 0.0)))
+        diff = math.hypot(0.5 * (self.mu20 - self.mu02), self.mu11)
+        return math.sqrt(max(common + diff, 0.0)), math.sqrt(max(common - diff, 0.0))
 
 
 def weighted_moments(weight: np.ndarray, origin_xy_px: tuple[float, float] = (0.0, 0.0)) -> Moments | None:

@@ -27,11 +27,12 @@ import numpy as np
 
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
-from ..video.reader import iter_frames, probe_video
+from ..video.reader import iter_frames, iter_yuv_frames, probe_video
 from .centroid import SoftCentroid, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
 from .moments import Moments, weighted_moments
 from .timebase import frame_timing
+from . import kernels as K
 
 __all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids"]
 
@@ -86,7 +87,23 @@ class TrackerSettings:
         :func:`~servoscope.markers.centroid.soft_centroid`, signed membership
         with the background's variation projected out, over a tapered disk;
         3× more accurate on uncompressed footage of the reference scene but
-        not yet robust to H.264 chroma bleed and small stickers.
+        not yet robust to H.264 chroma bleed and small stickers. Both are
+        estimators of the RGB path (``engine="reference-rgb"``); the YUV
+        engines have their own (see :mod:`servoscope.markers.kernels`).
+    engine : {"auto", "numba", "numpy", "reference-rgb"}
+        ``"numba"`` (what ``"auto"`` picks): the fused kernel on the
+        decoder's YUV planes, classifying by chroma and unmixing with
+        full-resolution luma, decoding on a second thread; the most accurate
+        and the fastest. ``"numpy"``: the same maths in plain numpy (slow; a
+        reference). ``"reference-rgb"``: the previous path (every frame
+        converted to RGB, HSV masks, ``centroid`` estimator), for comparison.
+        With ``centroid="projected"``, ``"auto"`` picks ``"reference-rgb"``.
+    backend : {"auto", "cpu", "cuda"}
+        Where the kernel runs. ``"auto"`` and ``"cpu"``: this machine's CPU.
+        ``"cuda"``: requires a CUDA GPU (or ``NUMBA_ENABLE_CUDASIM=1``) and
+        fails clearly without one; the paper's batch reduction is
+        :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
+        windowed sub-pixel kernel itself still runs on the CPU.
     """
 
     lead: str = "#d62728"
@@ -99,6 +116,8 @@ class TrackerSettings:
     shape_tolerance: float = 0.03
     deinterlace: str | None = None
     centroid: str = "local"
+    engine: str = "auto"
+    backend: str = "auto"
 
 
 @dataclass
@@ -525,6 +544,7 @@ def track_video(
         raise ServoscopeError(f"centroid: {settings.centroid!r} is not 'local' or 'projected'")
     if not (settings.shape_tolerance > 0 and settings.support_margin_px >= 1):
         raise ServoscopeError("shape_tolerance must be > 0 and support_margin_px >= 1")
+    engine = resolve_engine(settings)
     lead = _MarkerTracker("lead", lead_spec, settings)
     trail = _MarkerTracker("trail", trail_spec, settings)
     led_model = ColourModel.from_seed(led_spec) if led_spec is not None else None  # type: ignore[arg-type]
@@ -543,66 +563,71 @@ def track_video(
     led_radius = 0.0
     prev_rgb: np.ndarray | None = None
 
-    for frame in iter_frames(path, fields=fields):
-        rgb = frame.rgb
-        if frame.index == 0 and AUTO in (lead_spec, trail_spec):
-            exclude = [led_model] if led_model is not None else []
-            exclude += [m.model for m in (lead, trail) if m.model is not None]
-            models = _auto_models(rgb, exclude)
+    if engine != "reference-rgb":
+        (snapshot, snapshot_index) = _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec,
+                                               led_model, progress, times, xy, area, sigma, reasons,
+                                               led_signal, warnings, repeated)
+    else:
+        for frame in iter_frames(path, fields=fields):
+            rgb = frame.rgb
+            if frame.index == 0 and AUTO in (lead_spec, trail_spec):
+                exclude = [led_model] if led_model is not None else []
+                exclude += [m.model for m in (lead, trail) if m.model is not None]
+                models = _auto_models(rgb, exclude)
+                for tracker in (lead, trail):
+                    if tracker.model is None:
+                        if not models:
+                            raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
+                        tracker.model = models.pop(0)
+            # A camcorder's duplicated frame: the same image under a new timestamp.
+            repeated.append(prev_rgb is not None and prev_rgb.shape == rgb.shape and np.array_equal(prev_rgb, rgb))
+            prev_rgb = rgb
+            found: dict[str, _Blob] = {}
+            reason = ""
             for tracker in (lead, trail):
-                if tracker.model is None:
-                    if not models:
-                        raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
-                    tracker.model = models.pop(0)
-        # A camcorder's duplicated frame: the same image under a new timestamp.
-        repeated.append(prev_rgb is not None and prev_rgb.shape == rgb.shape and np.array_equal(prev_rgb, rgb))
-        prev_rgb = rgb
-        found: dict[str, _Blob] = {}
-        reason = ""
-        for tracker in (lead, trail):
-            blob, why = tracker.find(rgb)
-            if blob is None:
-                tracker.lose()
-                reason = reason or why
-                if frame.index == 0:
-                    raise ServoscopeError(_nothing_matches(path, tracker, rgb))
-                continue
-            if tracker.reach_px is None:
-                tracker.learn(rgb, blob)
-                # Measure again with the learned colour and size.
-                blob = tracker.find(rgb)[0] or blob
-            tracker.accept(blob, rgb)
-            found[tracker.name] = blob
-            reason = reason or blob.flaw
-        times.append(frame.time_s)
-        for name in ("lead", "trail"):
-            if name in found:
-                m = found[name].moments
-                point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
-                xy[name].append((float(point[0]), float(point[1])))
-                area[name].append(m.m00 * frame.row_step)
-                sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
-            else:
-                xy[name].append((math.nan, math.nan))
-                area[name].append(math.nan)
-                sigma[name].append(math.nan)
-        reasons.append(reason)
-        if snapshot is None and not reason and frame.row_step == 1:
-            snapshot, snapshot_index = rgb.copy(), frame.index
+                blob, why = tracker.find(rgb)
+                if blob is None:
+                    tracker.lose()
+                    reason = reason or why
+                    if frame.index == 0:
+                        raise ServoscopeError(_nothing_matches(path, tracker, rgb))
+                    continue
+                if tracker.reach_px is None:
+                    tracker.learn(rgb, blob)
+                    # Measure again with the learned colour and size.
+                    blob = tracker.find(rgb)[0] or blob
+                tracker.accept(blob, rgb)
+                found[tracker.name] = blob
+                reason = reason or blob.flaw
+            times.append(frame.time_s)
+            for name in ("lead", "trail"):
+                if name in found:
+                    m = found[name].moments
+                    point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
+                    xy[name].append((float(point[0]), float(point[1])))
+                    area[name].append(m.m00 * frame.row_step)
+                    sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
+                else:
+                    xy[name].append((math.nan, math.nan))
+                    area[name].append(math.nan)
+                    sigma[name].append(math.nan)
+            reasons.append(reason)
+            if snapshot is None and not reason and frame.row_step == 1:
+                snapshot, snapshot_index = rgb.copy(), frame.index
 
-        if led_model is not None:
-            if led_local is None and len(found) == 2:
-                led_local, led_radius = _locate_led(rgb, led_model, found["lead"].moments, found["trail"].moments)
-                if led_local is None:
-                    warnings.append("LED not found in the first frames: no input start (t0)")
-                    led_model = None
-            led_signal.append(
-                _led_brightness(rgb, led_local, led_radius, found.get("lead"), found.get("trail"))
-                if led_local is not None
-                else math.nan
-            )
-        if progress is not None and frame.index % 50 == 0:
-            progress(frame.index + 1)
+            if led_model is not None:
+                if led_local is None and len(found) == 2:
+                    led_local, led_radius = _locate_led(rgb, led_model, found["lead"].moments, found["trail"].moments)
+                    if led_local is None:
+                        warnings.append("LED not found in the first frames: no input start (t0)")
+                        led_model = None
+                led_signal.append(
+                    _led_brightness(rgb, led_local, led_radius, found.get("lead"), found.get("trail"))
+                    if led_local is not None
+                    else math.nan
+                )
+            if progress is not None and frame.index % 50 == 0:
+                progress(frame.index + 1)
 
     n = len(times)
     if progress is not None:
@@ -691,6 +716,21 @@ def track_video(
         trail_sigma_px=trail_sigma,
         angle_sigma_rad=angle_sigma,
     )
+
+
+ENGINES = ("auto", "numba", "numpy", "reference-rgb")
+BACKENDS = ("auto", "cpu", "cuda")
+
+
+def resolve_engine(settings: TrackerSettings) -> str:
+    """The engine ``settings`` asks for, "auto" resolved; raises on unknown names."""
+    if settings.engine not in ENGINES:
+        raise ServoscopeError(f"engine: {settings.engine!r} is not one of {', '.join(ENGINES)}")
+    if settings.backend not in BACKENDS:
+        raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
+    if settings.engine == "auto":
+        return "reference-rgb" if settings.centroid == "projected" else "numba"
+    return settings.engine
 
 
 def _local_unmixing_centroid(rgb: np.ndarray, window: tuple[int, int, int, int],
@@ -847,3 +887,306 @@ def _led_brightness(rgb, local, radius, lead: _Blob | None, trail: _Blob | None)
     disk = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= r * r
     roi = rgb[y0:y1, x0:x1]
     return float(roi[disk].max(axis=1).mean())
+
+
+# ---------------------------------------------------------------------------
+# The YUV path: the fused kernel on the decoder's planes
+# ---------------------------------------------------------------------------
+#: Luma weight of the unmixing (see kernels): luma's α weighs w_Y·c_Y² against
+#: chroma's |c_C|². Measured on the twin's H.264 footage, a strong luma weight
+#: (16–64) is *worse* (0.0059–0.0067°) than 1 (0.0049°): around these stickers
+#: the background's luma varies (blade edge, sky gradient) as much as the
+#: marker/background luma contrast, and the ring's per-angle background does
+#: not capture it finely enough for luma; chroma's background is flatter.
+W_Y = 1.0
+#: Recentring passes of the soft moments.
+YUV_ITERATIONS = 1
+#: Width of the background ring (px).
+RING_PX = 4.0
+#: Extra support margin of the YUV path over ``support_margin_px`` (px): the
+#: chroma's 2-px smear must fit inside the support.
+YUV_EXTRA_MARGIN_PX = -1.5
+#: Largest |α_Y − α_C| at which luma still sets the weight (see kernels).
+AGREE = 0.25
+#: Clip of the membership.
+ALPHA_RANGE = (0.0, 1.0)
+
+
+def _bt601(rgb) -> np.ndarray:
+    """Limited-range BT.601 YCbCr of an RGB colour (0–255), as the writer/decoder use."""
+    r, g, b = (float(c) for c in rgb)
+    return np.array([16.0 + (65.481 * r + 128.553 * g + 24.966 * b) / 255.0,
+                     128.0 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255.0,
+                     128.0 + (112.0 * r - 93.786 * g - 18.214 * b) / 255.0])
+
+
+def _chroma_angle(uv: np.ndarray) -> np.ndarray:
+    return np.arctan2(uv[..., 1] - 128.0, uv[..., 0] - 128.0)
+
+
+class _YuvState:
+    """A marker's YUV model: its kernel parameter row and class area."""
+
+    def __init__(self) -> None:
+        self.prm = np.zeros(K.NP)
+        self.class_area: float | None = None
+
+
+def _learn_yuv(tracker: _MarkerTracker, frame, m: Moments, margin_px: float) -> None:
+    """Marker colour (median), chroma direction, hue tolerance and noise from the core of the found blob."""
+    reach = float(tracker.reach_px or tracker.extent_px)
+    h, w = frame.y.shape
+    r_core = max(1.5, 0.6 * (reach - 1.5))
+    x0, x1 = int(max(0, math.floor(m.x_px - r_core))), int(min(w, math.ceil(m.x_px + r_core) + 1))
+    y0, y1 = int(max(0, math.floor(m.y_px - r_core))), int(min(h, math.ceil(m.y_px + r_core) + 1))
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    core = (xx - m.x_px) ** 2 + (yy - m.y_px) ** 2 <= r_core**2
+    xs, ys = xx[core].astype(np.float64), yy[core].astype(np.float64)
+    Y = frame.y[y0:y1, x0:x1][core].astype(np.float64)
+    U = K._chroma_np(frame.u, xs, ys, frame.row_offset, frame.row_step)
+    V = K._chroma_np(frame.v, xs, ys, frame.row_offset, frame.row_step)
+    ym, um, vm = float(np.median(Y)), float(np.median(U)), float(np.median(V))
+    sat = math.hypot(um - 128.0, vm - 128.0)
+    ang = np.arctan2(V - 128.0, U - 128.0)
+    mean_ang = math.atan2(vm - 128.0, um - 128.0)
+    spread = np.abs(np.angle(np.exp(1j * (ang - mean_ang))))
+    tol = float(np.clip(3.0 * np.percentile(spread, 90), math.radians(10.0), math.radians(20.0)))
+
+    def robust_var(x):
+        mad = float(np.median(np.abs(x - np.median(x))))
+        return (1.4826 * mad) ** 2 + 0.25
+
+    st = tracker.yuv
+    prm = st.prm
+    prm[K.P.YM], prm[K.P.UM], prm[K.P.VM] = ym, um, vm
+    prm[K.P.DIR_U], prm[K.P.DIR_V] = (um - 128.0) / max(sat, 1e-9), (vm - 128.0) / max(sat, 1e-9)
+    prm[K.P.COS_TOL] = math.cos(tol)
+    prm[K.P.SAT_MIN] = max(6.0, 0.45 * sat)
+    prm[K.P.AGREE] = AGREE
+    prm[K.P.RADIUS] = reach + margin_px + YUV_EXTRA_MARGIN_PX
+    prm[K.P.RING] = RING_PX
+    prm[K.P.W_Y] = W_Y
+    prm[K.P.ITER] = YUV_ITERATIONS
+    prm[K.P.ENABLED] = 1.0
+    prm[K.P.VAR_Y] = robust_var(Y)
+    # A codec leaves a flat interior almost free of chroma noise while its chroma errors at the
+    # edges are larger: take at least the luma's noise for the chroma.
+    prm[K.P.VAR_C] = max(0.5 * (robust_var(U) + robust_var(V)), prm[K.P.VAR_Y])
+    prm[K.P.ALPHA_LO], prm[K.P.ALPHA_HI] = ALPHA_RANGE
+    prm[K.P.MIN_DEN] = 100.0
+    st.tolerance_rad = tol
+
+
+def _separate_hues(states: list[_YuvState], led_rgb) -> None:
+    """Narrow each marker's hue tolerance to under half the angle to the other colours (markers, LED)."""
+    dirs = [math.atan2(st.prm[K.P.DIR_V], st.prm[K.P.DIR_U]) for st in states]
+    others = list(dirs)
+    if led_rgb is not None:
+        y, u, v = _bt601(led_rgb)
+        others.append(math.atan2(v - 128.0, u - 128.0))
+    for i, st in enumerate(states):
+        gaps = [abs(math.remainder(dirs[i] - o, 2 * math.pi)) for j, o in enumerate(others) if j != i]
+        tol = st.tolerance_rad
+        if gaps:
+            tol = min(tol, 0.45 * min(gaps))
+        st.prm[K.P.COS_TOL] = math.cos(max(tol, math.radians(4.0)))
+
+
+def _window(tracker: _MarkerTracker, shape, centre=None) -> tuple[int, int, int, int] | None:
+    h, w = shape
+    c = tracker.predicted() if centre is None else centre
+    if c is None:
+        return None
+    r = tracker.search_radius_px + tracker.extent_px if centre is None else tracker.extent_px + 6.0
+    x0 = int(max(0, math.floor(c[0] - r)))
+    y0 = int(max(0, math.floor(c[1] - r)))
+    x1 = int(min(w, math.ceil(c[0] + r) + 1))
+    y1 = int(min(h, math.ceil(c[1] + r) + 1))
+    if x1 - x0 <= 2 or y1 - y0 <= 2:
+        return None
+    return x0, y0, x1, y1
+
+
+def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Blob | None:
+    """The marker's blob from its kernel output row, or None when the window's class is implausible."""
+    st = tracker.yuv
+    n = row[K.Q.N]
+    if not n > 0 or not row[K.Q.M00] > 0:
+        return None
+    if st.class_area is not None and not (0.4 * st.class_area <= n <= 2.5 * st.class_area):
+        return None
+    h, w = shape
+    x0, y0, x1, y1 = window
+    # A class cut by the window's edge (not the image's) may be part of something larger: look wider.
+    if ((row[K.Q.XMIN] < x0 + 1 and x0 > 0) or (row[K.Q.YMIN] < y0 + 1 and y0 > 0)
+            or (row[K.Q.XMAX] > x1 - 2 and x1 < w) or (row[K.Q.YMAX] > y1 - 2 and y1 < h)):
+        return None
+    if math.hypot(row[K.Q.X] - row[K.Q.BX], row[K.Q.Y] - row[K.Q.BY]) > 0.5 * tracker.extent_px + 2.0:
+        return None
+    m = Moments(float(row[K.Q.M00]), float(row[K.Q.X]), float(row[K.Q.Y]), float(row[K.Q.MU20]),
+                float(row[K.Q.MU11]), float(row[K.Q.MU02]))
+    radius = st.prm[K.P.RADIUS]
+    support_out = m.x_px - radius < 0 or m.y_px - radius < 0 or m.x_px + radius > w - 1 or m.y_px + radius > h - 1
+    at_border = bool(support_out or row[K.Q.RING_N] < 8)
+    soft = SoftCentroid(m, math.sqrt(0.5 * (row[K.Q.VAR_X] + row[K.Q.VAR_Y])), radius, float(row[K.Q.CONTRAST]),
+                        0.0, at_border)
+    return _Blob(m, soft.sigma_px, tracker._flaw(soft))
+
+
+def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec, led_model, progress, times, xy,
+              area, sigma, reasons, led_signal, warnings, repeated):
+    """Per-frame loop of the YUV engines; fills the per-frame lists; returns (snapshot, snapshot_index)."""
+    kernel = K.ENGINES[engine]
+    led_kernel = K.LED_ENGINES[engine]
+    trackers = (lead, trail)
+    for t in trackers:
+        t.yuv = _YuvState()
+    params = np.zeros((2, K.NP))
+    out = np.zeros((2, K.NQ))
+    led_prm = np.zeros(K.LED_NP)
+    led_out = np.zeros(K.LED_NQ)
+    led_rgb = led_model.rgb if led_model is not None else None
+    led_local = None
+    snapshot = None
+    snapshot_index = 0
+    prev = None
+    learned = False
+    if settings.backend == "cuda":
+        from .gpu import GpuClassifier
+
+        GpuClassifier()  # raises without a CUDA GPU; the per-window work stays on the CPU (see gpu.py)
+
+    def measure_one(k: int, frame, window, centre=None) -> _Blob | None:
+        one = np.zeros((2, K.NP))
+        one[k] = trackers[k].yuv.prm
+        one[k, K.P.X0:K.P.Y1 + 1] = window
+        if centre is not None:
+            one[k, K.P.CX], one[k, K.P.CY], one[k, K.P.USE_CENTRE] = centre[0], centre[1], 1.0
+        tmp = np.zeros((2, K.NQ))
+        kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, one, np.zeros(K.LED_NP), tmp,
+               np.zeros(K.LED_NQ))
+        out[k] = tmp[k]
+        return _kernel_blob(trackers[k], tmp[k], window, frame.y.shape)
+
+    for frame in iter_yuv_frames(path, fields=fields):
+        shape = frame.y.shape
+        # A camcorder's duplicated frame: the same image under a new timestamp.
+        repeated.append(prev is not None and _same_image(prev, frame))
+        prev = frame
+        found: dict[str, _Blob] = {}
+        reason = ""
+        slow = False
+        if not learned:
+            rgb = frame.rgb
+            if AUTO in (lead_spec, trail_spec):
+                exclude = [led_model] if led_model is not None else []
+                exclude += [m.model for m in trackers if m.model is not None]
+                models = _auto_models(rgb, exclude)
+                for tracker in trackers:
+                    if tracker.model is None:
+                        if not models:
+                            raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
+                        tracker.model = models.pop(0)
+            first = {}
+            for tracker in trackers:
+                blob, why = tracker.find(rgb)
+                if blob is None:
+                    raise ServoscopeError(_nothing_matches(path, tracker, rgb))
+                tracker.learn(rgb, blob)
+                blob = tracker.find(rgb)[0] or blob
+                first[tracker.name] = blob
+                _learn_yuv(tracker, frame, blob.moments, settings.support_margin_px)
+            _separate_hues([t.yuv for t in trackers], led_rgb)
+            for k, tracker in enumerate(trackers):
+                m = first[tracker.name].moments
+                window = _window(tracker, shape, (m.x_px, m.y_px))
+                measure_one(k, frame, window)
+                tracker.yuv.class_area = float(out[k, K.Q.N]) if out[k, K.Q.N] > 0 else None
+            learned = True
+            slow = True
+        params[:] = 0.0
+        windows = []
+        for k, tracker in enumerate(trackers):
+            params[k] = tracker.yuv.prm
+            window = _window(tracker, shape) if tracker.last_xy is not None or not slow else None
+            if window is None and slow:
+                m = first[tracker.name].moments  # the first frame: around the found blob
+                window = _window(tracker, shape, (m.x_px, m.y_px))
+            windows.append(window)
+            if window is None:
+                params[k, K.P.ENABLED] = 0.0
+            else:
+                params[k, K.P.X0:K.P.Y1 + 1] = window
+        led_prm[0] = 1.0 if led_local is not None else 0.0
+        kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, params, led_prm, out, led_out)
+        for k, tracker in enumerate(trackers):
+            blob = _kernel_blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
+            if blob is None:
+                # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
+                # then measure it with the kernel around what was found.
+                slow = True
+                rgb_blob, why = tracker.find(frame.rgb)
+                if rgb_blob is not None:
+                    m = rgb_blob.moments
+                    blob = measure_one(k, frame, _window(tracker, shape, (m.x_px, m.y_px)), (m.x_px, m.y_px))
+                    if blob is None:
+                        blob = rgb_blob
+                        out[k, K.Q.M00], out[k, K.Q.X], out[k, K.Q.Y] = m.m00, m.x_px, m.y_px
+                else:
+                    out[k, K.Q.M00] = 0.0
+                    tracker.lose()
+                    reason = reason or why
+                    continue
+            tracker.accept(blob, None)
+            found[tracker.name] = blob
+            reason = reason or blob.flaw
+        times.append(frame.time_s)
+        for name in ("lead", "trail"):
+            if name in found:
+                m = found[name].moments
+                point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
+                xy[name].append((float(point[0]), float(point[1])))
+                area[name].append(m.m00 * frame.row_step)
+                sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
+            else:
+                xy[name].append((math.nan, math.nan))
+                area[name].append(math.nan)
+                sigma[name].append(math.nan)
+        reasons.append(reason)
+        if snapshot is None and not reason and frame.row_step == 1:
+            snapshot, snapshot_index = frame.rgb, frame.index
+        if led_model is not None:
+            if led_local is None and len(found) == 2:
+                led_local, led_radius = _locate_led(frame.rgb, led_model, found["lead"].moments, found["trail"].moments)
+                if led_local is None:
+                    warnings.append("LED not found in the first frames: no input start (t0)")
+                    led_model = None
+                else:
+                    led_prm[:] = (1.0, led_local[0], led_local[1], 1.5 * led_radius + 1.0)
+                    slow = True
+            if led_local is not None and slow:
+                led_kernel(frame.y, led_prm, out, led_out)
+            led_signal.append(float(led_out[0]) if led_local is not None and len(found) == 2 else math.nan)
+        if progress is not None and frame.index % 50 == 0:
+            progress(frame.index + 1)
+    return snapshot, snapshot_index
+
+
+def _same_image(a, b) -> bool:
+    if a.y.shape != b.y.shape or a.row_offset != b.row_offset:
+        return False
+    # Rows from the middle first: a differing frame differs there at once.
+    h = a.i420.shape[0]
+    mid = slice(h // 3, h // 3 + 8)
+    return _planes_equal(a.i420[mid], b.i420[mid]) and _planes_equal(a.i420, b.i420)
+
+
+@K.njit(cache=True, nogil=True)
+def _planes_equal(a, b) -> bool:
+    if a.shape != b.shape:
+        return False
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            if a[i, j] != b[i, j]:
+                return False
+    return True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -42,45 +43,99 @@ def _track_xy_recorded(result: "IdentificationResult", label: str, index: int) -
     return lead, trail
 
 
-def build_report(result: "IdentificationResult") -> str:
-    """One self-contained HTML page (figures embedded as PNG)."""
+_PARAM_LABELS = {
+    "gain": "gain K (output per input unit)",
+    "natural_frequency_rad_s": "natural frequency ωn (rad/s)",
+    "damping_ratio": "damping ratio ζ",
+    "dead_time_s": "dead time from the dwells' phases τ (s)",
+    "pole_rad_s": "real pole (rad/s)",
+    "zero_rad_s": "real zero (rad/s)",
+}
+
+
+def _poly_text(coeffs) -> str:
+    n = len(coeffs) - 1
+    terms = []
+    for i, c in enumerate(coeffs):
+        power = n - i
+        if c == 0:
+            continue
+        s_part = "" if power == 0 else ("s" if power == 1 else f"s^{power}")
+        terms.append(f"{c:.5g}{'·' if s_part else ''}{s_part}")
+    return " + ".join(terms) or "0"
+
+
+def model_equation(model, dead_time_s: float | None) -> str:
+    """The identified model as text: the paper's eq. 6 form for 2nd order, polynomials otherwise."""
+    tau = "not measured" if dead_time_s is None else f"{1e3 * dead_time_s:.1f} ms"
+    if tuple(model.order) == (0, 2) and model.natural_frequency_rad_s is not None:
+        wn, z = model.natural_frequency_rad_s, model.damping_ratio
+        return (f"G(s) = {model.gain:.4g} · {wn:.4g}² / (s² + 2·{z:.3g}·{wn:.4g}·s + {wn:.4g}²) · e^(−sτ), τ = {tau}")
+    return f"G(s) = ({_poly_text(model.num)}) / ({_poly_text(model.den)}) · e^(−sτ), τ = {tau}"
+
+
+def build_report(result: "IdentificationResult", figures_dir: Path | None = None) -> str:
+    """One self-contained HTML page (figures embedded as PNG).
+
+    Parameters
+    ----------
+    result : IdentificationResult
+    figures_dir : Path, optional
+        Also write every figure there as PNG and SVG.
+    """
     fr = result.frequency_response
     model = result.model
     summary = result.summary()
     sections: list[ReportSection] = []
 
-    s = ReportSection("Identified model")
+    s = ReportSection("Identified model", figures_dir=figures_dir)
     dead = result.dead_time_s
-    dead_txt = "not measured" if dead is None else f"{1e3 * dead:.1f} ms"
+    s.text(model_equation(model, dead))
+    fit_info = model.summary().get("fit") or {}
     s.text(
-        f"G(s) = {model.gain:.4g} · {model.natural_frequency_rad_s:.4g}² / "
-        f"(s² + 2·{model.damping_ratio:.3g}·{model.natural_frequency_rad_s:.4g}·s + {model.natural_frequency_rad_s:.4g}²)"
-        f" · e^(−sτ), τ = {dead_txt}"
+        ("Fit: magnitude and phase with a dead time (every dwell's input start is known from the LED)"
+         if model.mode == "complex" else "Fit: magnitude only, as in the paper (the dead time cannot be identified from |G|)")
+        + f"; order (nb, na) = {tuple(model.order)}"
+        + (f"; CIFER's J = {fit_info['J']:.3g} ({model.J_rating})" if fit_info.get("J") is not None else "")
+        + (f"; AIC {fit_info['AIC']:.4g}, BIC {fit_info['BIC']:.4g}" if fit_info.get("AIC") is not None else "")
+        + "."
     )
-    rows = [
-        ["gain K (rad per input unit)", model.gain, model.gain_stderr],
-        ["natural frequency ωn (rad/s)", model.natural_frequency_rad_s, model.natural_frequency_stderr_rad_s],
-        ["damping ratio ζ", model.damping_ratio, model.damping_ratio_stderr],
-        ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s, None],
-        ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi), None],
-        [f"dead time τ (s), from the {result.dead_time_source or '—'}", dead, None if result.step is None else result.step.dead_time_stderr_s],
-        ["dead time from the dwells' phases (s)", model.dead_time_s, model.dead_time_stderr_s],
-        ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db, None],
-        ["residual RMS of the fit, phase (deg)", model.residual_rms_deg, None],
+    boot = model.ci95_bootstrap or {}
+    header = ["parameter", "value", "standard error", "95 % interval"] + (["95 % bootstrap"] if boot else [])
+    rows = []
+    for name in model.param_names:
+        lo_hi = model.ci95.get(name)
+        row = [_PARAM_LABELS.get(name, name), model.params.get(name), model.stderr.get(name),
+               "—" if lo_hi is None else f"[{lo_hi[0]:.5g}, {lo_hi[1]:.5g}]"]
+        if boot:
+            b = boot.get(name)
+            row.append("—" if b is None else f"[{b[0]:.5g}, {b[1]:.5g}]")
+        rows.append(row)
+    s.table(header, rows)
+    other = [
+        ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
+        ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],
+        [f"dead time τ (s), from the {result.dead_time_source or '—'}", dead],
+        ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db],
+        ["residual RMS of the fit, phase (deg)", model.residual_rms_deg],
     ]
-    s.text(
-        "Fit: " + ("magnitude and phase with a dead time (the input start of every dwell is known from the LED)."
-                   if model.mode == "complex" else "magnitude only, as in the paper (the dead time cannot be identified from |G|).")
-    )
-    s.table(["quantity", "value", "standard error"], rows)
+    s.table(["quantity", "value"], other)
     all_warnings = list(result.warnings) + [w for t in summary["tests"] for w in (f"{t['label']}: {x}" for x in t["warnings"])]
     if all_warnings:
-        s.warnings(all_warnings)
+        s.warnings(list(dict.fromkeys(all_warnings)))
     else:
         s.html_parts.append('<p class="ok">No warnings.</p>')
+    selection = model.order_selection
+    if selection is not None:
+        s.text(
+            f"Order selection: the gain falls by {selection.slope_db_per_decade:.1f} dB/decade at the top of the data "
+            f"(relative degree ≥ {selection.relative_degree_estimate}); candidates compared by BIC and J:"
+        )
+        cols = ["order", "n_params", "J", "AIC", "BIC", "residual_rms_db", "determined", "chosen"]
+        s.table(cols, [[str(tuple(r["order"])) if k == "order" else r.get(k) for k in cols] for r in selection.table])
     sections.append(s)
 
-    s = ReportSection("Frequency response")
+    s = ReportSection("Frequency response", figures_dir=figures_dir)
     omega_grid = np.logspace(np.log10(2 * np.pi * fr.frequency_hz.min() / 2), np.log10(2 * np.pi * fr.frequency_hz.max() * 2), 300)
     fig = bode_figure(
         fr.frequency_hz,
@@ -92,34 +147,44 @@ def build_report(result: "IdentificationResult") -> str:
         model_phase_deg(model.transfer_function, omega_grid, model.dead_time_s if model.dead_time_s is not None else dead),
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
-    s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot")
+    s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
     s.table(
-        ["dwell", "f (Hz)", "gain", "gain (dB)", "phase (deg)", "fidelity"],
-        [[r["video"], r["frequency_hz"], r["gain"], r["gain_db"], r["phase_deg"], r["fidelity"]] for r in fr.summary()],
+        ["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"],
+        [[r["video"], r["frequency_hz"], r["gain"], r.get("gain_stderr"), r["gain_db"], r["phase_deg"], r.get("phase_stderr_deg"),
+          r["fidelity"], r.get("thd"), ", ".join(r.get("flags") or []) or "—"] for r in fr.summary()],
     )
     sections.append(s)
 
     label = _representative_dwell(result)
     fit = result.sine_fits[label]
     track = result.tracks[label]
-    s = ReportSection(f"One dwell: {label}")
+    s = ReportSection(f"One dwell: {label}", figures_dir=figures_dir)
     fitted = fit.model(track.time_s)
     s.figure(
         dwell_figure(track.time_s, track.angle_rad, track.valid, fitted, fit.window_s, t0_s=fit_t0(result, label), title=f"{label}: measured angle and fitted sine (paper Fig. 7)"),
         f"Fitted at {fit.frequency_hz:.4g} Hz: amplitude {fit.amplitude:.4g} rad, residual RMS {fit.residual_rms:.3g} rad, fidelity {fit.fidelity:.4f}. Shaded: the steady-state window.",
         "Dwell trace",
     )
+    s.text("Every dwell (click to enlarge):")
+    thumbs = []
+    for other, other_fit in result.sine_fits.items():
+        t = result.tracks[other]
+        fig = dwell_figure(t.time_s, t.angle_rad, t.valid, other_fit.model(t.time_s), other_fit.window_s,
+                           t0_s=fit_t0(result, other), title=f"{other}: {other_fit.frequency_hz:.3g} Hz")
+        thumbs.append((fig, f"{other}: amplitude {other_fit.amplitude:.4g} rad, fidelity {other_fit.fidelity:.4f}", f"trace_{other}"))
+    s.thumbnails(thumbs)
     sections.append(s)
 
     if result.step is not None and result.step_label is not None:
         st = result.step
         strack = result.tracks[result.step_label]
-        s = ReportSection(f"Step response: {result.step_label}")
+        s = ReportSection(f"Step response: {result.step_label}", figures_dir=figures_dir)
         predicted = st.predicted(strack.time_s)
         s.figure(
             step_figure(strack.time_s, strack.angle_rad, strack.valid, predicted, t0_s=strack.t0_s, dead_time_s=st.dead_time_s),
             "Measured step response and the identified model's prediction (dead time fitted on this test).",
             "Step response",
+            name="step",
         )
         from ..sysid import model_step_metrics
 
@@ -143,12 +208,16 @@ def build_report(result: "IdentificationResult") -> str:
     if track.snapshot_rgb is not None:
         i = track.snapshot_index
         lead, trail = _track_xy_recorded(result, first, i)
-        s = ReportSection("Tracking check")
+        s = ReportSection("Tracking check", figures_dir=figures_dir)
         s.figure(
             overlay_figure(track.snapshot_rgb, lead, trail, float(track.angle_rad[i]), title=f"{first}, frame {i}: detected centroids (paper Fig. 4)"),
             "Squares: the markers' centroids; solid line: the line joining them; dashed: horizontal reference.",
             "Frame with detected centroids",
+            name="overlay",
         )
+        segmentation = _segmentation(result, track, lead, trail)
+        if segmentation is not None:
+            s.figure(segmentation, "Pixels within each marker's colour band (before the soft, subpixel weighting), and each marker zoomed with its centroid.", "Segmentation", name="segmentation")
         from ..markers.error_analysis import angle_error_analysis, plot_angle_error
 
         analysis = angle_error_analysis(track)
@@ -159,6 +228,7 @@ def build_report(result: "IdentificationResult") -> str:
                 f"a 1 px centroid error bounds the angle error at {analysis['worst_case_deg']:.3f}°; the measured "
                 f"centroid noise ({analysis['centroid_sigma_px']:.3f} px) gives {analysis['angle_sigma_deg']:.4f}° (1σ).",
                 "Error analysis",
+                name="error_analysis",
             )
         s.table(
             ["video", "frames", "valid", "t0 (s)", "warnings"],
@@ -167,6 +237,18 @@ def build_report(result: "IdentificationResult") -> str:
         sections.append(s)
 
     return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}", sections)
+
+
+def _segmentation(result: "IdentificationResult", track, lead, trail):
+    from ..markers.colour import AUTO, ColourModel, parse_colour
+    from .figures import segmentation_figure
+
+    specs = {"lead": parse_colour(result.campaign.lead), "trail": parse_colour(result.campaign.trail)}
+    if AUTO in specs.values():
+        return None
+    frame = track.snapshot_rgb
+    masks = {name: ColourModel.from_seed(spec).mask(frame) for name, spec in specs.items()}
+    return segmentation_figure(frame, masks, specs, {"lead": lead, "trail": trail})
 
 
 def fit_t0(result: "IdentificationResult", label: str) -> float | None:

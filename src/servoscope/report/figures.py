@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-__all__ = ["bode_figure", "dwell_figure", "step_figure", "overlay_figure"]
+__all__ = ["bode_figure", "dwell_figure", "step_figure", "overlay_figure", "segmentation_figure"]
 
 
 def bode_figure(
@@ -163,5 +163,49 @@ def overlay_figure(
         ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", color="white", fontsize=9)
     ax.set_title(title or f"Detected centroids, θ = {np.degrees(angle_rad):.3f}° (paper Fig. 4)")
     ax.set_axis_off()
+    fig.tight_layout()
+    return fig
+
+
+def segmentation_figure(
+    frame_rgb: np.ndarray,
+    masks: dict[str, np.ndarray],
+    colours_rgb: dict[str, tuple[float, float, float]],
+    centroids_xy_px: dict[str, Sequence[float]],
+    *,
+    zoom_px: int = 40,
+) -> Figure:
+    """Segmentation by colour (paper Fig. 3): the whole frame, then each marker zoomed.
+
+    Parameters
+    ----------
+    frame_rgb : ndarray, shape (h, w, 3), uint8
+    masks : dict of name → bool array (h, w)
+        Pixels classified as each marker.
+    colours_rgb : dict of name → (r, g, b) in 0–255
+    centroids_xy_px : dict of name → (x, y)
+        Measured centroids in the recorded image, drawn as white squares.
+    """
+    h, w = frame_rgb.shape[:2]
+    canvas = np.zeros((h, w, 3))
+    for name, mask in masks.items():
+        canvas[mask] = np.asarray(colours_rgb[name]) / 255.0
+    fig, axes = plt.subplots(1, 1 + len(masks), figsize=(7.5 + 2.5 * len(masks), 3.6),
+                             gridspec_kw={"width_ratios": [3] + [1] * len(masks)})
+    axes[0].imshow(canvas, interpolation="nearest")
+    axes[0].set_title("pixels classified as markers (paper Fig. 3)", fontsize=9)
+    for ax, name in zip(axes[1:], masks):
+        x, y = centroids_xy_px[name]
+        x0, y0 = int(max(0, x - zoom_px)), int(max(0, y - zoom_px))
+        x1, y1 = int(min(w, x + zoom_px)), int(min(h, y + zoom_px))
+        ax.imshow(frame_rgb[y0:y1, x0:x1], interpolation="nearest", extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5))
+        ax.contour(np.arange(x0, x1), np.arange(y0, y1), masks[name][y0:y1, x0:x1].astype(float), levels=[0.5], colors="white", linewidths=0.8)
+        ax.plot([x], [y], "s", ms=6, mfc="none", mec="white", mew=1.5)
+        ax.set_title(f"{name}: ({x:.2f}, {y:.2f}) px", fontsize=9)
+    for ax, name in zip(axes[:1], ["all"]):
+        for n, (x, y) in centroids_xy_px.items():
+            ax.plot([x], [y], "s", ms=5, mfc="none", mec="white", mew=1.2)
+    for ax in axes:
+        ax.set_axis_off()
     fig.tight_layout()
     return fig

@@ -6,6 +6,7 @@ import base64
 import html
 import io
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from matplotlib.figure import Figure
 
@@ -19,6 +20,12 @@ th{background:#f4f4f4} td:first-child,th:first-child{text-align:left}
 .warn{background:#fff4e5;border-left:4px solid #f0a020;padding:.4rem .8rem;margin:.3rem 0}
 .ok{color:#1a7f37} .bad{color:#b42318} figure{margin:1rem 0} img{max-width:100%;height:auto}
 figcaption{font-size:.85rem;color:#555} .muted{color:#666;font-size:.85rem}
+.thumbs{display:flex;flex-wrap:wrap;gap:.5rem} .thumb{width:230px;margin:0}
+.thumb img{width:230px;border:1px solid #ddd;cursor:zoom-in}
+.thumb:target{position:fixed;inset:0;background:rgba(0,0,0,.75);display:flex;align-items:center;justify-content:center;z-index:10;width:auto}
+.thumb:target img{width:auto;max-width:95vw;max-height:90vh;background:#fff;cursor:default}
+.thumb .close{display:none} .thumb:target .close{display:block;position:fixed;top:1rem;right:1.5rem;color:#fff;font-size:2rem;text-decoration:none}
+.thumb:target figcaption{display:none}
 """
 
 
@@ -28,6 +35,7 @@ class ReportSection:
 
     title: str
     html_parts: list[str] = field(default_factory=list)
+    figures_dir: Path | None = None
 
     def text(self, text: str) -> "ReportSection":
         self.html_parts.append(f"<p>{html.escape(text)}</p>")
@@ -39,13 +47,35 @@ class ReportSection:
         self.html_parts.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
         return self
 
-    def figure(self, fig: Figure, caption: str, alt: str) -> "ReportSection":
-        data = figure_png_base64(fig)
+    def figure(self, fig: Figure, caption: str, alt: str, name: str | None = None) -> "ReportSection":
+        data = self._encode(fig, name)
         self.html_parts.append(
             f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
             f"<figcaption>{html.escape(caption)}</figcaption></figure>"
         )
         return self
+
+    def thumbnails(self, items: list[tuple[Figure, str, str]]) -> "ReportSection":
+        """Small figures that enlarge on click (CSS :target, no script); items are (figure, caption, name)."""
+        cells = []
+        for fig, caption, name in items:
+            data = self._encode(fig, name)
+            anchor = html.escape(name)
+            cells.append(
+                f'<figure class="thumb" id="{anchor}"><a href="#{anchor}"><img alt="{html.escape(caption)}" '
+                f'src="data:image/png;base64,{data}"></a><a class="close" href="#_" title="close">×</a>'
+                f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+            )
+        self.html_parts.append('<div class="thumbs">' + "".join(cells) + "</div>")
+        return self
+
+    def _encode(self, fig: Figure, name: str | None) -> str:
+        if self.figures_dir is not None and name:
+            # The same figures as files, for papers and slides: PNG and SVG.
+            self.figures_dir.mkdir(parents=True, exist_ok=True)
+            fig.savefig(self.figures_dir / f"{name}.png", dpi=150)
+            fig.savefig(self.figures_dir / f"{name}.svg")
+        return figure_png_base64(fig)
 
     def warnings(self, items: list[str]) -> "ReportSection":
         for item in items:

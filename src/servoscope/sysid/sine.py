@@ -693,11 +693,12 @@ def fit_sine(
         lever = float(t0_s) - tc
         phase = _wrap_pi(phi_c + 2.0 * math.pi * f_hat * lever)
         g_ph = np.zeros(p_names)
-        if amp > 0:
-            g_ph[1], g_ph[2] = b / amp**2, -a / amp**2
+        amp2 = amp * amp  # may underflow to 0 for a vanishing amplitude (found by hypothesis)
+        if amp2 > 0:
+            g_ph[1], g_ph[2] = b / amp2, -a / amp2
         if p_names == 4:
             g_ph[3] = 2.0 * math.pi * lever
-        phase_se = math.sqrt(max(float(g_ph @ cov @ g_ph), 0.0)) if amp > 0 else float("nan")
+        phase_se = math.sqrt(max(float(g_ph @ cov @ g_ph), 0.0)) if amp2 > 0 else float("nan")
         if t0_stderr_s is not None and math.isfinite(phase_se):
             phase_se = math.hypot(phase_se, 2.0 * math.pi * f_hat * float(t0_stderr_s))
 

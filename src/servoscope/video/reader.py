@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["VideoInfo", "Frame", "FIELD_ORDERS", "probe_video", "iter_frames"]
+__all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames"]
 
 
 @dataclass(frozen=True)
@@ -212,3 +212,164 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
             raise ServoscopeError(f"{path}: contains no decodable frames")
     finally:
         container.close()
+
+
+@dataclass
+class YuvFrame:
+    """One decoded frame as its native YUV 4:2:0 planes (no RGB conversion).
+
+    Attributes
+    ----------
+    index, time_s, row_offset, row_step
+        As :class:`Frame`.
+    y : ndarray, shape (rows, width), uint8
+        Luma of the frame, or of one field (every second row).
+    u, v : ndarray, shape (height/2, width/2), uint8
+        The whole frame's chroma planes (Cb, Cr), shared by both fields: a
+        kernel maps image row ``j`` to frame row ``row_offset + row_step·j``.
+    i420 : ndarray, shape (height·3/2, width), uint8
+        The planes as one array (PyAV's yuv420p layout).
+    """
+
+    index: int
+    time_s: float
+    y: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    i420: np.ndarray
+    row_offset: int = 0
+    row_step: int = 1
+
+    @property
+    def rgb(self) -> np.ndarray:
+        """The frame (or field) as RGB uint8, converted on demand (BT.601 limited range)."""
+        import cv2
+
+        rgb = cv2.cvtColor(self.i420, cv2.COLOR_YUV2RGB_I420)
+        if self.row_step == 1:
+            return rgb
+        return np.ascontiguousarray(rgb[self.row_offset::self.row_step])
+
+    def to_frame_xy(self, xy_px: np.ndarray) -> np.ndarray:
+        """Points in this image (px, shape (..., 2)) in full-frame coordinates."""
+        xy = np.array(xy_px, dtype=np.float64, copy=True)
+        xy[..., 1] = self.row_offset + self.row_step * xy[..., 1]
+        return xy
+
+
+_END = object()
+
+
+def _i420_of(frame) -> np.ndarray:
+    if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
+        frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
+                               format="yuv420p")
+    return frame.to_ndarray()
+
+
+def _decode_into(path: Path, q, stop, threads: int) -> None:
+    """Decoder thread: (time_s, i420) items into ``q``; then _END, or the exception."""
+    import queue as _queue
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except _queue.Full:
+                continue
+        return False
+
+    try:
+        container = _open(path)
+    except BaseException as exc:  # noqa: BLE001 - handed to the consumer
+        put(exc)
+        return
+    try:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        if threads:
+            stream.codec_context.thread_count = threads
+        time_base = stream.time_base or Fraction(1, 1)
+        rate = stream.average_rate or stream.guessed_rate
+        last_time = None
+        n = 0
+        try:
+            for frame in container.decode(stream):
+                if frame.pts is not None:
+                    time_s = float(frame.pts * time_base)
+                elif last_time is not None and rate:
+                    time_s = last_time + 1.0 / float(rate)
+                else:
+                    time_s = 0.0
+                last_time = time_s
+                if not put((time_s, _i420_of(frame), float(rate) if rate else 0.0)):
+                    return
+                n += 1
+        except av.error.FFmpegError as exc:
+            if n == 0:
+                put(ServoscopeError(f"{path}: cannot decode any frame ({_reason(exc)})"))
+                return
+        if n == 0:
+            put(ServoscopeError(f"{path}: contains no decodable frames"))
+            return
+        put(_END)
+    except BaseException as exc:  # noqa: BLE001
+        put(exc)
+    finally:
+        container.close()
+
+
+def iter_yuv_frames(path: str | Path, *, threads: int = 0, fields: str | None = None,
+                    queue_size: int = 8) -> Iterator[YuvFrame]:
+    """Decode a video's frames as YUV 4:2:0 planes, on a decoder thread, streaming.
+
+    A decoder thread fills a bounded queue (``queue_size`` frames) while the
+    caller works on the previous frames: decoding and tracking overlap, and
+    memory stays bounded whatever the video's length. Frames in other pixel
+    formats are converted to yuv420p (odd sizes cropped by one pixel).
+
+    Parameters and errors as :func:`iter_frames`; yields :class:`YuvFrame`.
+    """
+    import queue as _queue
+    import threading
+
+    path = Path(path)
+    if fields not in FIELD_ORDERS:
+        raise ServoscopeError(f"fields must be one of None, 'tff', 'bff', not {fields!r}")
+    q: _queue.Queue = _queue.Queue(maxsize=max(1, int(queue_size)))
+    stop = threading.Event()
+    worker = threading.Thread(target=_decode_into, args=(path, q, stop, threads), name="servoscope-decode",
+                              daemon=True)
+    worker.start()
+    index = 0
+    try:
+        while True:
+            item = q.get()
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            time_s, i420, rate = item
+            h = i420.shape[0] * 2 // 3
+            w = i420.shape[1]
+            y = i420[:h]
+            chroma = i420[h:].reshape(2, h // 2, w // 2)
+            u, v = chroma[0], chroma[1]
+            if fields is None:
+                yield YuvFrame(index, time_s, y, u, v, i420)
+                index += 1
+                continue
+            half = 0.5 / rate if rate else 0.0
+            order = (0, 1) if fields == "tff" else (1, 0)
+            for k, parity in enumerate(order):
+                yield YuvFrame(index, time_s + k * half, y[parity::2], u, v, i420, parity, 2)
+                index += 1
+    finally:
+        stop.set()
+        while worker.is_alive():
+            try:
+                q.get(timeout=0.05)
+            except _queue.Empty:
+                pass
+        worker.join()

@@ -1,0 +1,192 @@
+"""The fused YUV kernel: numpy reference and numba agree; engines agree; the CUDA reduction in the simulator."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from servoscope.markers import TrackerSettings, track_video
+from servoscope.markers import kernels as K
+from servoscope.simulate import Scene
+from servoscope.simulate.clips import render_clip
+from servoscope.video.reader import iter_yuv_frames
+from servoscope.video.writer import rgb_to_yuv420p
+
+ENGINES = ["numpy", "numba"]
+
+
+def _frame(seed: int = 0, h: int = 96, w: int = 128) -> np.ndarray:
+    """A synthetic yuv420p frame: textured grey background, a red and a green disk (anti-aliased), noise."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    rgb = np.empty((h, w, 3))
+    rgb[:] = (90.0, 95.0, 100.0)
+    rgb[: h // 3] = (150.0, 170.0, 200.0)  # a "sky" band
+    for (cx, cy, r, col) in ((85.3, 40.7, 9.0, (214, 39, 40)), (30.6, 52.2, 8.0, (44, 160, 44))):
+        cov = np.clip(r + 0.5 - np.hypot(xx - cx, yy - cy), 0.0, 1.0)[..., None]
+        rgb = cov * np.asarray(col, float) + (1 - cov) * rgb
+    rgb += rng.normal(0, 1.5, rgb.shape)
+    return rgb_to_yuv420p(np.clip(rgb, 0, 255).round().astype(np.uint8))
+
+
+def _params(i420: np.ndarray) -> np.ndarray:
+    from servoscope.markers.tracker import _bt601
+
+    rows = []
+    for rgb, (x0, y0, x1, y1), r in (((214, 39, 40), (60, 15, 115, 70), 11.0), ((44, 160, 44), (5, 25, 60, 80), 10.0)):
+        y, u, v = _bt601(rgb)
+        sat = np.hypot(u - 128, v - 128)
+        p = np.zeros(K.NP)
+        p[[K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (x0, y0, x1, y1)
+        p[[K.P.YM, K.P.UM, K.P.VM]] = (y, u, v)
+        p[[K.P.DIR_U, K.P.DIR_V]] = ((u - 128) / sat, (v - 128) / sat)
+        p[K.P.COS_TOL] = np.cos(np.radians(15))
+        p[K.P.SAT_MIN] = 0.45 * sat
+        p[K.P.AGREE] = 0.25
+        p[K.P.RADIUS] = r
+        p[K.P.RING] = 4.0
+        p[K.P.W_Y] = 1.0
+        p[K.P.ITER] = 2
+        p[K.P.ENABLED] = 1
+        p[K.P.VAR_Y] = p[K.P.VAR_C] = 2.25
+        p[K.P.ALPHA_LO], p[K.P.ALPHA_HI] = 0.0, 1.0
+        p[K.P.MIN_DEN] = 100.0
+        rows.append(p)
+    return np.array(rows)
+
+
+def _run(engine, i420, params, led, row_off=0, row_step=1):
+    h = i420.shape[0] * 2 // 3
+    y = i420[:h][row_off::row_step]
+    u, v = i420[h:].reshape(2, h // 2, -1)
+    out = np.zeros((params.shape[0], K.NQ))
+    led_out = np.zeros(K.LED_NQ)
+    K.track_frame(engine, y, u, v, row_off, row_step, params, led, out, led_out)
+    return out, led_out
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_kernel_finds_disks(engine):
+    i420 = _frame()
+    out, led_out = _run(engine, i420, _params(i420), np.array([1.0, 0.2, 0.1, 3.0]))
+    # Pixel centres at integers: a disk centred at 85.3 (in pixel-edge units) sits at 84.8.
+    np.testing.assert_allclose(out[0, [K.Q.X, K.Q.Y]], [84.8, 40.2], atol=0.08)
+    np.testing.assert_allclose(out[1, [K.Q.X, K.Q.Y]], [30.1, 51.7], atol=0.08)
+    np.testing.assert_allclose(out[:, K.Q.M00], [np.pi * 81, np.pi * 64], rtol=0.05)
+    assert np.isfinite(led_out[0]) and led_out[1] > 0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("fields", [(0, 1), (1, 2)])
+def test_numpy_and_numba_agree(seed, fields):
+    i420 = _frame(seed)
+    params = _params(i420)
+    if seed == 2:  # the recentring centre given, one pass, no background ring (window at the edge)
+        params[:, K.P.USE_CENTRE] = 1
+        params[:, K.P.CX], params[:, K.P.CY] = (84.0, 29.0), (40.0, 53.0)
+        params[:, K.P.ITER] = 1
+        params[1, K.P.RING] = 0.0
+    if fields[1] == 2:
+        params[:, K.P.Y0] //= 2
+        params[:, K.P.Y1] //= 2
+        params[:, K.P.CY] /= 2
+    led = np.array([1.0, 0.3, -0.05, 4.0])
+    a, la = _run("numpy", i420, params, led, *fields)
+    b, lb = _run("numba", i420, params, led, *fields)
+    assert a[:, K.Q.M00].min() > 10
+    np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(lb, la, rtol=1e-9, atol=1e-9)
+
+
+def test_disabled_and_empty_windows():
+    i420 = _frame()
+    params = _params(i420)
+    params[0, K.P.ENABLED] = 0
+    params[1, K.P.DIR_U], params[1, K.P.DIR_V] = -params[1, K.P.DIR_U], -params[1, K.P.DIR_V]  # matches nothing
+    for engine in ENGINES:
+        out, led_out = _run(engine, i420, params, np.array([1.0, 0.0, 0.0, 3.0]))
+        assert not out.any() and np.isnan(led_out[0])
+
+
+@pytest.fixture(scope="module")
+def small_clip(tmp_path_factory):
+    path = tmp_path_factory.mktemp("k") / "c.avi"
+    truth = render_clip(path, Scene.for_size(360, 288, background_seed=1), 0.03 * np.sin(np.arange(12) / 3.0),
+                        codec="raw", fps=50)
+    return path, truth
+
+
+def test_engines_agree_on_a_clip(small_clip):
+    path, truth = small_clip
+    a = track_video(path, TrackerSettings(led=None, engine="numpy"))
+    b = track_video(path, TrackerSettings(led=None, engine="numba"))
+    assert a.valid.all() and b.valid.all()
+    np.testing.assert_allclose(b.lead_xy_px, a.lead_xy_px, atol=1e-9)
+    np.testing.assert_allclose(b.trail_xy_px, a.trail_xy_px, atol=1e-9)
+    ref = track_video(path, TrackerSettings(led=None, engine="reference-rgb"))
+    assert ref.valid.all()
+    err = np.degrees(np.abs(b.angle_rad - truth["angle_rad"]))
+    assert err.max() < 0.03
+
+
+def test_streaming_reader_matches_planes(small_clip):
+    import av
+
+    path, _ = small_clip
+    with av.open(str(path)) as c:
+        planes = [f.to_ndarray() for f in c.decode(c.streams.video[0])]
+    got = list(iter_yuv_frames(path, queue_size=2))
+    assert len(got) == len(planes)
+    for f, p in zip(got, planes):
+        np.testing.assert_array_equal(f.i420, p)
+    # Stopping early ends the decoder thread (bounded queue, nothing left running).
+    gen = iter_yuv_frames(path, queue_size=1)
+    next(gen)
+    gen.close()
+    import threading
+
+    assert not any(t.name == "servoscope-decode" and t.is_alive() for t in threading.enumerate())
+
+
+def test_bad_engine_names():
+    from servoscope.errors import ServoscopeError
+    from servoscope.markers.tracker import resolve_engine
+
+    assert resolve_engine(TrackerSettings()) == "numba"
+    assert resolve_engine(TrackerSettings(centroid="projected")) == "reference-rgb"
+    with pytest.raises(ServoscopeError, match="engine"):
+        resolve_engine(TrackerSettings(engine="opencl"))
+    with pytest.raises(ServoscopeError, match="backend"):
+        resolve_engine(TrackerSettings(backend="tpu"))
+
+
+_CUDASIM = textwrap.dedent(
+    """
+    import numpy as np, sys
+    sys.path.insert(0, {tests!r})
+    from test_kernels import _frame, _params
+    from servoscope.markers import gpu
+    assert gpu.cuda_available()
+    frames = np.stack([_frame(s) for s in range(2)])
+    params = _params(frames[0])
+    cpu = gpu.class_moments_cpu(frames, params)
+    sim = gpu.GpuClassifier().class_moments(frames, params)
+    assert cpu[:, :, 0].min() > 0, cpu
+    np.testing.assert_allclose(sim, cpu, rtol=1e-12)
+    print("ok", cpu[0].tolist())
+    """
+)
+
+
+def test_cuda_reduction_in_simulator():
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    code = _CUDASIM.format(tests=str(Path(__file__).parent))
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert res.stdout.startswith("ok")
