@@ -503,6 +503,25 @@ def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | 
     return 0.5 * (t_prev + t_next), float(gap / math.sqrt(12.0)), None
 
 
+
+def _record_markers(frame, found: dict, xy: dict, area: dict, sigma: dict) -> None:
+    """Append one frame's centroids, areas and uncertainties (NaN where a marker is missing).
+
+    A field (``row_step`` 2) has half the rows: its areas count double and its
+    y uncertainty is that of a pixel twice as tall.
+    """
+    for name in ("lead", "trail"):
+        if name in found:
+            m = found[name].moments
+            point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
+            xy[name].append((float(point[0]), float(point[1])))
+            area[name].append(m.m00 * frame.row_step)
+            sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
+        else:
+            xy[name].append((math.nan, math.nan))
+            area[name].append(math.nan)
+            sigma[name].append(math.nan)
+
 def track_video(
     path: str | Path,
     settings: TrackerSettings | None = None,
@@ -600,17 +619,7 @@ def track_video(
                 found[tracker.name] = blob
                 reason = reason or blob.flaw
             times.append(frame.time_s)
-            for name in ("lead", "trail"):
-                if name in found:
-                    m = found[name].moments
-                    point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
-                    xy[name].append((float(point[0]), float(point[1])))
-                    area[name].append(m.m00 * frame.row_step)
-                    sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
-                else:
-                    xy[name].append((math.nan, math.nan))
-                    area[name].append(math.nan)
-                    sigma[name].append(math.nan)
+            _record_markers(frame, found, xy, area, sigma)
             reasons.append(reason)
             if snapshot is None and not reason and frame.row_step == 1:
                 snapshot, snapshot_index = rgb.copy(), frame.index
@@ -1141,17 +1150,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
             found[tracker.name] = blob
             reason = reason or blob.flaw
         times.append(frame.time_s)
-        for name in ("lead", "trail"):
-            if name in found:
-                m = found[name].moments
-                point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
-                xy[name].append((float(point[0]), float(point[1])))
-                area[name].append(m.m00 * frame.row_step)
-                sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
-            else:
-                xy[name].append((math.nan, math.nan))
-                area[name].append(math.nan)
-                sigma[name].append(math.nan)
+        _record_markers(frame, found, xy, area, sigma)
         reasons.append(reason)
         if snapshot is None and not reason and frame.row_step == 1:
             snapshot, snapshot_index = frame.rgb, frame.index

@@ -102,6 +102,16 @@ def _open(path: Path) -> av.container.InputContainer:
     return container
 
 
+
+def _frame_time_s(frame, time_base, rate, last_time: float | None) -> float:
+    """A frame's presentation time (PTS × time base), in seconds."""
+    if frame.pts is not None:
+        return float(frame.pts * time_base)
+    if last_time is not None and rate:
+        # No PTS at all (some raw streams): the nominal rate is all there is.
+        return last_time + 1.0 / float(rate)
+    return 0.0
+
 def _reason(exc: Exception) -> str:
     text = getattr(exc, "strerror", None) or str(exc)
     return text.splitlines()[0] if text else type(exc).__name__
@@ -185,14 +195,7 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
         last_time = None
         try:
             for frame in container.decode(stream):
-                if frame.pts is not None:
-                    time_s = float(frame.pts * time_base)
-                elif last_time is not None and rate:
-                    # No PTS at all (some raw streams): the nominal rate is all there is.
-                    time_s = last_time + 1.0 / float(rate)
-                else:
-                    time_s = 0.0
-                last_time = time_s
+                time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
                 rgb = frame.to_ndarray(format="rgb24")
                 if fields is None:
                     yield Frame(index, time_s, rgb)
@@ -296,13 +299,7 @@ def _decode_into(path: Path, q, stop, threads: int) -> None:
         n = 0
         try:
             for frame in container.decode(stream):
-                if frame.pts is not None:
-                    time_s = float(frame.pts * time_base)
-                elif last_time is not None and rate:
-                    time_s = last_time + 1.0 / float(rate)
-                else:
-                    time_s = 0.0
-                last_time = time_s
+                time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
                 if not put((time_s, _i420_of(frame), float(rate) if rate else 0.0)):
                     return
                 n += 1
