@@ -26,3 +26,29 @@ def test_bench_json_on_tiny_clips(tmp_path):
 def test_bench_rejects_bad_size():
     res = CliRunner().invoke(bench, ["--size", "71x40"])
     assert res.exit_code != 0 and "even" in res.output
+
+
+def test_bench_whole_commands_and_one_core_runs(tmp_path):
+    # --whole times `python -m servoscope track` and the baseline scripts as processes; --workers 2 adds the
+    # multi-video runs (all cores, and one decoder thread per video against one pinned core).
+    res = CliRunner().invoke(bench, ["--json", "--frames", "6", "--size", "160x128", "--cache", str(tmp_path),
+                                     "--workers", "2", "--whole"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output.strip().splitlines()[-1])
+    for codec in ("raw", "h264"):
+        row = out["whole"][codec]
+        assert row["track_s"] > 0 and row["opencv_s"] > 0 and row["decode_s"] > 0
+        assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
+    par = out["parallel"]
+    assert par["one_core_fps"] > 0 and par["parallel_one_thread_fps"] > 0 and par["speedup_over_one_core"] > 0
+    # The baseline scripts live in a temporary folder that is gone afterwards.
+    assert not any(p.is_dir() for p in tmp_path.iterdir())
+
+
+def test_decode_only_matches_the_tracker_reader(tmp_path):
+    from servoscope.bench import decode_only, render_bench_clips
+    from servoscope.video.reader import iter_yuv_frames
+
+    clips = render_bench_clips(tmp_path, 4, 160, 128)
+    for path in clips.values():
+        assert decode_only(path) == sum(1 for _ in iter_yuv_frames(path)) == 4

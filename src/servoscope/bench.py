@@ -11,7 +11,12 @@ one run, on this machine:
   → ``cv2.moments`` ×2 per frame;
 * **gpu**: the CUDA batch reduction (:mod:`servoscope.markers.gpu`), when a
   CUDA GPU is present;
-* **parallel**: several videos tracked by a pool of worker processes.
+* **parallel**: several videos tracked by a pool of worker processes, and
+  the same with one decoder thread per video against one process on one
+  core (one decoder thread);
+* **whole** (``--whole``): whole processes, start-up included —
+  ``python -m servoscope track`` against an OpenCV script and a decode-only
+  script run by the same Python.
 
 Frames per second and the ratios track/opencv and track/decode are printed
 (``--json``: one JSON object). Timings are wall-clock, best of ``--repeat``.
@@ -29,7 +34,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-__all__ = ["bench", "run_bench", "render_bench_clips", "opencv_pipeline", "decode_only"]
+__all__ = ["bench", "run_bench", "render_bench_clips", "opencv_pipeline", "decode_only", "whole_commands"]
 
 LEAD = "#d62728"
 TRAIL = "#2ca02c"
@@ -61,16 +66,24 @@ def render_bench_clips(cache: Path, frames: int, width: int, height: int, fps: f
     return clips
 
 
-def decode_only(path: Path) -> int:
-    """Decode every frame to its YUV planes (PyAV); the frame count."""
+def decode_only(path: Path, threads: int = 0) -> int:
+    """Decode every frame to its YUV planes (PyAV); the frame count.
+
+    The same decoder settings and plane views as the tracker's decoder thread
+    (:func:`servoscope.video.reader.configure_decoder`,
+    :func:`~servoscope.video.reader.yuv_planes`), so that track/decode
+    compares like with like.
+    """
     import av
+
+    from .video.reader import configure_decoder, yuv_planes
 
     n = 0
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
+        configure_decoder(stream, threads)
         for frame in container.decode(stream):
-            frame.to_ndarray()  # yuv420p: the planes, (h·3/2, w)
+            yuv_planes(frame)
             n += 1
     return n
 
@@ -115,6 +128,99 @@ def _track(path: str) -> int:
     from .markers import TrackerSettings, track_video
 
     return track_video(path, TrackerSettings(LEAD, TRAIL, LED)).n_frames
+
+
+def _one_decoder_thread() -> None:
+    """Pool initializer (and one-core run): a single decoder thread, so one video uses one core."""
+    from .video import reader
+
+    reader.DECODER_THREADS = 1
+
+
+def _pin_one_core() -> None:
+    """Pool initializer of the one-core baseline: this process on one CPU, one decoder thread.
+
+    Without the pinning, "one process" is not one core: the decoder thread
+    and the tracking thread run side by side on two.
+    """
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    _one_decoder_thread()
+
+
+#: The whole-command OpenCV baseline, written to a temporary file and run with the same Python:
+#: what a user's script costs as a process (start-up and imports included).
+OPENCV_SCRIPT = """\
+import sys
+import av, cv2
+bands = {bands!r}
+n = 0
+with av.open(sys.argv[1]) as container:
+    stream = container.streams.video[0]
+    stream.thread_type = "AUTO"
+    for frame in container.decode(stream):
+        hsv = cv2.cvtColor(frame.to_ndarray(format="bgr24"), cv2.COLOR_BGR2HSV)
+        for marker in bands:
+            mask = cv2.inRange(hsv, *marker[0])
+            for extra in marker[1:]:
+                mask |= cv2.inRange(hsv, *extra)
+            cv2.moments(mask, binaryImage=True)
+        n += 1
+print(n)
+"""
+
+#: The whole-command decode-only baseline (PyAV, the tracker's decoder settings).
+DECODE_SCRIPT = """\
+import sys
+from servoscope.bench import decode_only
+print(decode_only(sys.argv[1]))
+"""
+
+
+def _run_process(argv: list[str]) -> float:
+    """Wall-clock seconds of one process, start-up included; raises when it fails."""
+    import subprocess
+
+    start = time.perf_counter()
+    done = subprocess.run(argv, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)} failed:\n{done.stderr[-2000:]}")
+    return seconds
+
+
+def whole_commands(clips: dict[str, Path], workdir: Path, repeat: int = 1, echo=None) -> dict:
+    """Whole-process timings: ``python -m servoscope track`` vs an OpenCV script and a decode-only script.
+
+    Each is a fresh process of the same Python (imports, numba's cached
+    kernels, the video's decoding and the CSV all included), best of
+    ``repeat``; the ratios are time(baseline) / time(track).
+    """
+    import sys
+    import tempfile
+
+    say = echo or (lambda s: None)
+    result = {}
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        opencv = Path(tmp) / "opencv_baseline.py"
+        opencv.write_text(OPENCV_SCRIPT.format(bands=[_hsv_band(LEAD), _hsv_band(TRAIL)]))
+        decode = Path(tmp) / "decode_baseline.py"
+        decode.write_text(DECODE_SCRIPT)
+        out = Path(tmp) / "track.csv"
+        for codec, clip in clips.items():
+            runs = {
+                "track": [sys.executable, "-m", "servoscope", "track", str(clip), "--out", str(out)],
+                "opencv": [sys.executable, str(opencv), str(clip)],
+                "decode": [sys.executable, str(decode), str(clip)],
+            }
+            row = {f"{name}_s": min(_run_process(argv) for _ in range(max(1, repeat))) for name, argv in runs.items()}
+            row["track_over_opencv"] = row["opencv_s"] / row["track_s"]
+            row["track_over_decode"] = row["decode_s"] / row["track_s"]
+            result[codec] = row
+            say(f"  whole {codec:5s} track {row['track_s']:.2f} s, opencv {row['opencv_s']:.2f} s, decode "
+                f"{row['decode_s']:.2f} s: track/opencv {row['track_over_opencv']:.1f}x, "
+                f"track/decode {row['track_over_decode']:.2f}x")
+    return result
 
 
 def _gpu_rate(path: Path, batch: int = 64) -> float | None:
@@ -163,7 +269,7 @@ def _warm_up() -> None:
 
 
 def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Path | None = None,
-              repeat: int = 1, workers: int = 2, parallel_videos: int = 4, echo=None) -> dict:
+              repeat: int = 1, workers: int = 2, parallel_videos: int = 4, echo=None, whole: bool = False) -> dict:
     """Run every measurement; a plain dict of frames/s and ratios (see the module's doc)."""
     say = echo or (lambda s: None)
     cache = Path(cache) if cache is not None else _default_cache()
@@ -191,14 +297,31 @@ def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Pa
         start = time.perf_counter()
         seq = sum(_track(v) for v in videos)
         t_seq = time.perf_counter() - start
+        # One core: one process pinned to one CPU, one decoder thread (the default decoder is
+        # multi-threaded and decodes beside the tracking thread, so "one process" above already
+        # uses every core for H.264).
+        start = time.perf_counter()
+        with ProcessPoolExecutor(max_workers=1, initializer=_pin_one_core) as pool:
+            one = sum(pool.map(_track, videos))
+        t_one = time.perf_counter() - start
         start = time.perf_counter()
         with ProcessPoolExecutor(max_workers=workers) as pool:
             par = sum(pool.map(_track, videos))
         t_par = time.perf_counter() - start
+        start = time.perf_counter()
+        with ProcessPoolExecutor(max_workers=workers, initializer=_one_decoder_thread) as pool:
+            par1 = sum(pool.map(_track, videos))
+        t_par1 = time.perf_counter() - start
         result["parallel"] = {"videos": len(videos), "workers": workers, "sequential_fps": seq / t_seq,
-                              "parallel_fps": par / t_par, "speedup": t_seq / t_par}
+                              "parallel_fps": par / t_par, "speedup": t_seq / t_par,
+                              "one_core_fps": one / t_one, "parallel_one_thread_fps": par1 / t_par1,
+                              "speedup_over_one_core": t_one / t_par1}
         say(f"  {len(videos)} videos: one process {seq / t_seq:.0f} frames/s, {workers} processes "
             f"{par / t_par:.0f} frames/s ({t_seq / t_par:.2f}x)")
+        say(f"  {len(videos)} videos, one decoder thread each: one process on one core {one / t_one:.0f} frames/s, "
+            f"{workers} processes {par1 / t_par1:.0f} frames/s ({t_one / t_par1:.2f}x)")
+    if whole:
+        result["whole"] = whole_commands(clips, cache, repeat=repeat, echo=say)
     return result
 
 
@@ -211,7 +334,9 @@ def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Pa
 @click.option("--repeat", type=click.IntRange(min=1), default=1, show_default=True, help="Best of this many runs.")
 @click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True,
               help="Processes of the multi-video run (1: skip it).")
-def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int, workers: int) -> None:
+@click.option("--whole", is_flag=True,
+              help="Also time whole processes: `python -m servoscope track` vs an OpenCV script and decode-only.")
+def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int, workers: int, whole: bool) -> None:
     """Tracking speed vs decoding alone and vs an OpenCV pipeline (raw and H.264 clips)."""
     try:
         width, height = (int(v) for v in size.lower().split("x"))
@@ -220,6 +345,6 @@ def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int
     if width % 2 or height % 2 or width < 64 or height < 64:
         raise click.BadParameter("width and height must be even and ≥ 64", param_hint="--size")
     echo = None if as_json else click.echo
-    result = run_bench(frames, width, height, cache, repeat, workers, echo=echo)
+    result = run_bench(frames, width, height, cache, repeat, workers, echo=echo, whole=whole)
     if as_json:
         click.echo(json.dumps(result))

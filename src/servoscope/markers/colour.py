@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from matplotlib import colors as mcolors
 
 from ..errors import ServoscopeError
 
@@ -37,6 +36,10 @@ def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, floa
     text = spec.strip().lower()
     if text == AUTO:
         return AUTO
+    # Deferred: matplotlib (for its CSS colour table) costs 0.1 s of start-up
+    # that `servoscope track` would otherwise pay on every run.
+    from matplotlib import colors as mcolors
+
     try:
         if text.startswith("#"):
             if len(text) != 7:

@@ -547,7 +547,10 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
             uv = buf[s, 3]
             vv = buf[s, 4]
             va = 0.0
-            a = 1.0 if _is_class(prm, uv, vv) else 0.0
+            # The class flag is the weight only where no unmixing is possible: evaluated there only
+            # (a square root per support pixel saved; the same values either way).
+            unmixed = False
+            a = 0.0
             if have_bg:
                 t = (_atan2(dy * row_step, dx) + math.pi) * scale - 0.5
                 kf = math.floor(t)
@@ -574,6 +577,9 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                     gy = wy * cY * cY * trust
                     a = (gy * aY + cc * aC) / (gy + cc) if gy + cc > 0.0 else 0.0
                     va = (wy * wy * cY * cY * prm[17] + (cU * cU + cV * cV) * prm[18]) / (den * den)
+                    unmixed = True
+            if not unmixed:
+                a = 1.0 if _is_class(prm, uv, vv) else 0.0
             buf[s, 5] = a
             buf[s, 6] = va
             m00 += a

@@ -1174,10 +1174,12 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
 def _same_image(a, b) -> bool:
     if a.y.shape != b.y.shape or a.row_offset != b.row_offset:
         return False
-    # Rows from the middle first: a differing frame differs there at once.
-    h = a.i420.shape[0]
-    mid = slice(h // 3, h // 3 + 8)
-    return _planes_equal(a.i420[mid], b.i420[mid]) and _planes_equal(a.i420, b.i420)
+    # Rows from the middle first: a differing frame differs there at once. The whole-frame planes are
+    # compared (not the field's rows), on the decoder's own (strided) buffers: no copy.
+    h = a.luma.shape[0]
+    mid = slice(h // 2, h // 2 + 8)
+    return (_planes_equal(a.luma[mid], b.luma[mid]) and _planes_equal(a.luma, b.luma)
+            and _planes_equal(a.u, b.u) and _planes_equal(a.v, b.v))
 
 
 @K.njit(cache=True, nogil=True)

@@ -7,7 +7,7 @@ variable-frame-rate phones have no nominal rate at all.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
 from typing import Iterator
@@ -17,7 +17,8 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames"]
+__all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames",
+           "yuv_planes", "configure_decoder", "i420_of_planes"]
 
 
 @dataclass(frozen=True)
@@ -186,9 +187,7 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
     container = _open(path)
     try:
         stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
-        if threads:
-            stream.codec_context.thread_count = threads
+        configure_decoder(stream, threads)
         time_base = stream.time_base or Fraction(1, 1)
         rate = stream.average_rate or stream.guessed_rate
         index = 0
@@ -221,6 +220,10 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
 class YuvFrame:
     """One decoded frame as its native YUV 4:2:0 planes (no RGB conversion).
 
+    The planes are views of the decoder's own buffers (no copy: copying the
+    three planes of a 720×576 frame costs ~0.1 ms, a tenth of decoding an
+    H.264 frame); rows may be padded (strided arrays).
+
     Attributes
     ----------
     index, time_s, row_offset, row_step
@@ -230,8 +233,8 @@ class YuvFrame:
     u, v : ndarray, shape (height/2, width/2), uint8
         The whole frame's chroma planes (Cb, Cr), shared by both fields: a
         kernel maps image row ``j`` to frame row ``row_offset + row_step·j``.
-    i420 : ndarray, shape (height·3/2, width), uint8
-        The planes as one array (PyAV's yuv420p layout).
+    luma : ndarray, shape (height, width), uint8
+        The whole frame's luma plane (``y`` is ``luma`` or one field of it).
     """
 
     index: int
@@ -239,9 +242,20 @@ class YuvFrame:
     y: np.ndarray
     u: np.ndarray
     v: np.ndarray
-    i420: np.ndarray
+    luma: np.ndarray
     row_offset: int = 0
     row_step: int = 1
+    _i420: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def i420(self) -> np.ndarray:
+        """The planes as one contiguous array (PyAV's yuv420p layout, shape (height·3/2, width)).
+
+        Made on first use only: the per-frame fast path never needs it.
+        """
+        if self._i420 is None:
+            self._i420 = i420_of_planes(self.luma, self.u, self.v)
+        return self._i420
 
     @property
     def rgb(self) -> np.ndarray:
@@ -263,15 +277,55 @@ class YuvFrame:
 _END = object()
 
 
-def _i420_of(frame) -> np.ndarray:
+def i420_of_planes(y: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Y, U, V planes (possibly strided) as one contiguous (height·3/2, width) I420 array."""
+    h, w = y.shape
+    out = np.empty((h * 3 // 2, w), np.uint8)
+    out[:h] = y
+    chroma = out[h:].reshape(2, h // 2, w // 2)
+    chroma[0] = u
+    chroma[1] = v
+    return out
+
+
+#: Decoder threads when a caller passes 0: 0 lets FFmpeg choose (cores + 1). A process that runs
+#: one video per core (``bench``'s one-core runs, a campaign's worker pool) sets 1 here so that
+#: its decoders do not compete with each other for the same cores.
+DECODER_THREADS = 0
+
+
+def configure_decoder(stream, threads: int = 0) -> None:
+    """The decoder settings of every servoscope decoding loop (and of ``bench``'s decode-only run).
+
+    Frame and slice threading (``"AUTO"``); ``threads`` decoder threads, 0
+    meaning :data:`DECODER_THREADS`.
+    """
+    stream.thread_type = "AUTO"
+    threads = threads or DECODER_THREADS
+    if threads:
+        stream.codec_context.thread_count = threads
+
+
+def yuv_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A decoded frame's Y, U, V planes as uint8 views of its buffers (no copy).
+
+    Frames in another pixel format, or of odd size, are first converted to
+    yuv420p (cropped to even size). The views keep the frame's buffers alive.
+    """
     if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
         frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
                                format="yuv420p")
-    return frame.to_ndarray()
+    w, h = frame.width, frame.height
+    out = []
+    for plane, (pw, ph) in zip(frame.planes, ((w, h), (w // 2, h // 2), (w // 2, h // 2))):
+        # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
+        buf = np.frombuffer(plane, np.uint8)
+        out.append(buf[: ph * plane.line_size].reshape(ph, plane.line_size)[:, :pw])
+    return out[0], out[1], out[2]
 
 
 def _decode_into(path: Path, q, stop, threads: int) -> None:
-    """Decoder thread: (time_s, i420) items into ``q``; then _END, or the exception."""
+    """Decoder thread: (time_s, (y, u, v), rate) items into ``q``; then _END, or the exception."""
     import queue as _queue
 
     def put(item) -> bool:
@@ -290,17 +344,16 @@ def _decode_into(path: Path, q, stop, threads: int) -> None:
         return
     try:
         stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
-        if threads:
-            stream.codec_context.thread_count = threads
+        configure_decoder(stream, threads)
         time_base = stream.time_base or Fraction(1, 1)
         rate = stream.average_rate or stream.guessed_rate
+        rate_hz = float(rate) if rate else 0.0
         last_time = None
         n = 0
         try:
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
-                if not put((time_s, _i420_of(frame), float(rate) if rate else 0.0)):
+                if not put((time_s, yuv_planes(frame), rate_hz)):
                     return
                 n += 1
         except av.error.FFmpegError as exc:
@@ -347,20 +400,15 @@ def iter_yuv_frames(path: str | Path, *, threads: int = 0, fields: str | None = 
                 return
             if isinstance(item, BaseException):
                 raise item
-            time_s, i420, rate = item
-            h = i420.shape[0] * 2 // 3
-            w = i420.shape[1]
-            y = i420[:h]
-            chroma = i420[h:].reshape(2, h // 2, w // 2)
-            u, v = chroma[0], chroma[1]
+            time_s, (y, u, v), rate = item
             if fields is None:
-                yield YuvFrame(index, time_s, y, u, v, i420)
+                yield YuvFrame(index, time_s, y, u, v, y)
                 index += 1
                 continue
             half = 0.5 / rate if rate else 0.0
             order = (0, 1) if fields == "tff" else (1, 0)
             for k, parity in enumerate(order):
-                yield YuvFrame(index, time_s + k * half, y[parity::2], u, v, i420, parity, 2)
+                yield YuvFrame(index, time_s + k * half, y[parity::2], u, v, y, parity, 2)
                 index += 1
     finally:
         stop.set()
