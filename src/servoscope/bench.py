@@ -104,24 +104,13 @@ def _hsv_band(colour: str, half: int = 10) -> list[tuple[tuple[int, int, int], t
 
 
 def opencv_pipeline(path: Path, lead: str = LEAD, trail: str = TRAIL) -> int:
-    """A user's OpenCV pipeline: decode → BGR → HSV → inRange ×2 → moments ×2; the frame count."""
-    import av
-    import cv2
+    """A user's OpenCV pipeline: decode → BGR → HSV → inRange ×2 → moments ×2; the frame count.
 
-    bands = [_hsv_band(lead), _hsv_band(trail)]
-    n = 0
-    with av.open(str(path)) as container:
-        stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
-        for frame in container.decode(stream):
-            hsv = cv2.cvtColor(frame.to_ndarray(format="bgr24"), cv2.COLOR_BGR2HSV)
-            for marker in bands:
-                mask = cv2.inRange(hsv, *marker[0])
-                for extra in marker[1:]:
-                    mask |= cv2.inRange(hsv, *extra)
-                cv2.moments(mask, binaryImage=True)
-            n += 1
-    return n
+    The same source as the whole-command baseline (:data:`OPENCV_SCRIPT`), run in this process.
+    """
+    namespace: dict = {"__name__": "servoscope_opencv_baseline"}
+    exec(compile(OPENCV_SCRIPT.format(bands=[_hsv_band(lead), _hsv_band(trail)]), "<opencv baseline>", "exec"), namespace)
+    return namespace["run"](str(path))
 
 
 def _track(path: str) -> int:
@@ -153,20 +142,27 @@ def _pin_one_core() -> None:
 OPENCV_SCRIPT = """\
 import sys
 import av, cv2
-bands = {bands!r}
-n = 0
-with av.open(sys.argv[1]) as container:
-    stream = container.streams.video[0]
-    stream.thread_type = "AUTO"
-    for frame in container.decode(stream):
-        hsv = cv2.cvtColor(frame.to_ndarray(format="bgr24"), cv2.COLOR_BGR2HSV)
-        for marker in bands:
-            mask = cv2.inRange(hsv, *marker[0])
-            for extra in marker[1:]:
-                mask |= cv2.inRange(hsv, *extra)
-            cv2.moments(mask, binaryImage=True)
-        n += 1
-print(n)
+BANDS = {bands!r}
+
+
+def run(path):
+    n = 0
+    with av.open(path) as container:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        for frame in container.decode(stream):
+            hsv = cv2.cvtColor(frame.to_ndarray(format="bgr24"), cv2.COLOR_BGR2HSV)
+            for marker in BANDS:
+                mask = cv2.inRange(hsv, *marker[0])
+                for extra in marker[1:]:
+                    mask |= cv2.inRange(hsv, *extra)
+                cv2.moments(mask, binaryImage=True)
+            n += 1
+    return n
+
+
+if __name__ == "__main__":
+    print(run(sys.argv[1]))
 """
 
 #: The whole-command decode-only baseline (PyAV, the tracker's decoder settings).
