@@ -196,23 +196,11 @@ class Structure:
         """Numerator and denominator coefficients, descending powers of s, D(0) = 1."""
         off = self.offsets()
         k = math.exp(theta[0])
-        num = np.array([1.0])
-        for i in range(self.n_zero_real):
-            z = math.exp(theta[off["zr"] + i])
-            num = np.polymul(num, [1.0 / z, 1.0])
-        for i in range(self.n_zero_quad):
-            wn, ze = math.exp(theta[off["zq"] + 2 * i]), math.exp(theta[off["zq"] + 2 * i + 1])
-            num = np.polymul(num, [1.0 / wn**2, 2.0 * ze / wn, 1.0])
+        num = _factored_poly(theta, off["zr"], self.n_zero_real, off["zq"], self.n_zero_quad)
         if self.n_zero_coef:
             c = [theta[off["zc"] + i] * self.w_ref ** -(i + 1) for i in range(self.n_zero_coef)]
             num = np.array(c[::-1] + [1.0])
-        den = np.array([1.0])
-        for i in range(self.n_pole_real):
-            p = math.exp(theta[off["pr"] + i])
-            den = np.polymul(den, [1.0 / p, 1.0])
-        for i in range(self.n_pole_quad):
-            wn, ze = math.exp(theta[off["pq"] + 2 * i]), math.exp(theta[off["pq"] + 2 * i + 1])
-            den = np.polymul(den, [1.0 / wn**2, 2.0 * ze / wn, 1.0])
+        den = _factored_poly(theta, off["pr"], self.n_pole_real, off["pq"], self.n_pole_quad)
         return k * num, den
 
 
@@ -314,3 +302,18 @@ def continuous_phase_rad(st: Structure, theta: NDArray[np.float64], w: NDArray[n
     for z in roots:
         cont += np.angle(1.0 - jw / z)
     return base - principal + cont
+
+
+def _factored_poly(theta: NDArray[np.float64], real_at: int, n_real: int, quad_at: int, n_quad: int) -> NDArray[np.float64]:
+    """∏(s/r + 1) · ∏(s²/ωn² + 2ζs/ωn + 1), descending powers, constant term 1.
+
+    Roots r and (ωn, ζ) pairs are stored as logs in ``theta`` from ``real_at``
+    and ``quad_at`` on: numerator and denominator share this form.
+    """
+    poly = np.array([1.0])
+    for i in range(n_real):
+        poly = np.polymul(poly, [1.0 / math.exp(theta[real_at + i]), 1.0])
+    for i in range(n_quad):
+        wn, ze = math.exp(theta[quad_at + 2 * i]), math.exp(theta[quad_at + 2 * i + 1])
+        poly = np.polymul(poly, [1.0 / wn**2, 2.0 * ze / wn, 1.0])
+    return poly
