@@ -164,11 +164,11 @@ def test_second_run_tracks_nothing_and_force_tracks_again(two_video_campaign, qu
     fake = _CountingTracker(quick_result.tracks)
     monkeypatch.setattr(parallel, "track_video", fake)
     done = []
-    second = track_campaign(two_video_campaign, cache_dir=cache_dir, on_done=lambda *a: done.append(a))
+    second = track_campaign(two_video_campaign, cache_dir=cache_dir, on_done=lambda *a: done.append(a), workers=1)
     assert fake.calls == []
     assert done == [(label, "cached") for label in labels]
     assert list(second) == labels and all(tracks_equal(second[k], first[k]) for k in labels)
-    track_campaign(two_video_campaign, cache_dir=cache_dir, force=True)
+    track_campaign(two_video_campaign, cache_dir=cache_dir, force=True, workers=1)
     assert len(fake.calls) == 2
 
 
@@ -178,7 +178,7 @@ def test_a_stopped_run_resumes_with_the_unfinished_video(two_video_campaign, qui
     stopped = _CountingTracker(quick_result.tracks, stop_at=second_video)
     monkeypatch.setattr(parallel, "track_video", stopped)
     with pytest.raises(KeyboardInterrupt):
-        track_campaign(two_video_campaign, cache_dir=cache_dir)
+        track_campaign(two_video_campaign, cache_dir=cache_dir, workers=1)
     assert stopped.calls == [first_video, second_video]
     cache = TrackCache(cache_dir)
     assert len(list(cache.folder.glob("*.json"))) == 1  # the finished video only
@@ -188,7 +188,7 @@ def test_a_stopped_run_resumes_with_the_unfinished_video(two_video_campaign, qui
     npz.write_bytes(b"PK\x03\x04 half")
     resumed = _CountingTracker(quick_result.tracks)
     monkeypatch.setattr(parallel, "track_video", resumed)
-    tracks = track_campaign(two_video_campaign, cache_dir=cache_dir)
+    tracks = track_campaign(two_video_campaign, cache_dir=cache_dir, workers=1)
     assert resumed.calls == [second_video]
     for t in two_video_campaign.tests:
         assert tracks_equal(tracks[t.label], quick_result.tracks[t.label])

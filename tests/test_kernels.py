@@ -104,6 +104,51 @@ def test_numpy_and_numba_agree(seed, fields):
     np.testing.assert_allclose(lb, la, rtol=1e-9, atol=1e-9)
 
 
+def test_luma_alpha_at_chroma_resolution_agrees_with_chroma():
+    """Luma's α resampled as the writer sampled the chroma matches chroma's α across the edge.
+
+    A noise-free magenta disk (luma contrast 86 DN, chroma 45 DN) on a flat dark background:
+    pixel by pixel, luma's sharp α and the half-resolution chroma's smeared α disagree by far
+    more than the agreement test's tolerance along the whole edge; resampled through the
+    writer's 2×2 blocks and read at chroma's siting, luma's α agrees with chroma's to the
+    8-bit rounding. A block or siting off by one pixel would not.
+    """
+    from servoscope.markers.tracker import _bt601
+
+    h, w = 64, 80
+    cx, cy, r = 40.3, 31.6, 13.0
+    bg, mk = np.array([58.0, 60.0, 64.0]), np.array([227.0, 119.0, 194.0])
+    yy, xx = np.mgrid[0:h, 0:w]
+    # Coverage of a pixel square by the disk (its edge as a 1-px linear ramp).
+    cov = np.clip(r + 0.5 - np.hypot(xx - cx, yy - cy), 0.0, 1.0)
+    rgb = cov[..., None] * mk + (1.0 - cov[..., None]) * bg
+    i420 = rgb_to_yuv420p(np.clip(rgb, 0, 255).round().astype(np.uint8))
+    Y = i420[:h].astype(np.float64)
+    U, V = i420[h:].reshape(2, h // 2, -1)
+    (yb, ub, vb), (ym, um, vm) = _bt601(bg), _bt601(mk)
+    prm = np.zeros(K.NP)
+    prm[[K.P.YM, K.P.UM, K.P.VM]] = ym, um, vm
+    prm[K.P.ALPHA_LO], prm[K.P.ALPHA_HI] = -0.5, 1.5
+    px, py = xx.ravel().astype(np.float64), yy.ravel().astype(np.float64)
+    dx, dy = px - cx, py - cy
+    d2 = dx * dx + dy * dy
+    radius = r + 2.0
+    sup = d2 <= radius**2
+    aY = (Y.ravel()[sup] - yb) / (ym - yb)
+    sU = K._chroma_np(U, px[sup], py[sup], 0, 1)
+    sV = K._chroma_np(V, px[sup], py[sup], 0, 1)
+    cu, cv = um - ub, vm - vb
+    aC = (cu * (sU - ub) + cv * (sV - vb)) / (cu * cu + cv * cv)
+    my = np.full(K.N_BINS, yb)
+    aref = K._luma_alpha_at_chroma_res_np(prm, Y.ravel(), px, py, dx, dy, d2, radius, my, 0, 1, U.shape,
+                                          px[sup], py[sup], aY)
+    edge = (aC > 0.05) & (aC < 0.95)
+    assert edge.sum() > 100
+    assert np.abs(aY - aC)[edge].max() > 0.3  # pixel by pixel: the smear
+    assert np.abs(aref - aC)[edge].max() < 0.04  # at chroma's resolution: rounding only
+    assert np.abs(aref - aC).max() < 0.04
+
+
 def test_disabled_and_empty_windows():
     i420 = _frame()
     params = _params(i420)

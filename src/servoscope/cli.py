@@ -67,7 +67,29 @@ class _Progress:
         return False
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _LazyGroup(click.Group):
+    """A command group whose rarely used commands are imported only when run or listed.
+
+    click's documented lazy-loading pattern: ``servoscope track`` should not
+    pay the import of the rig driver or the benchmark on every start.
+    """
+
+    #: command name → "module:attribute" (relative to this package)
+    lazy = {"plan": ".rig.cli:plan", "drive": ".rig.cli:drive", "bench": ".bench:bench"}
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(self.lazy))
+
+    def get_command(self, ctx, name):
+        if name in self.lazy:
+            import importlib
+
+            module, attr = self.lazy[name].split(":")
+            return getattr(importlib.import_module(module, __package__), attr)
+        return super().get_command(ctx, name)
+
+
+@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="servoscope", prog_name="servoscope")
 def cli() -> None:
     """Measure an actuator's transfer function from video of two coloured markers."""
@@ -185,8 +207,8 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
 @click.option("--bootstrap", default=0, show_default=True, type=click.IntRange(min=0),
               help="Also give 95 %% intervals from this many bootstrap resamplings of the dwells.")
 @click.option("--keep-going", is_flag=True, help="Leave out videos that cannot be read or tracked (with a warning) and identify from the rest.")
-@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=0),
-              help="Videos tracked in parallel by a local Dask cluster of this many processes; 0 = one per core.")
+@click.option("--workers", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Videos tracked in parallel by a local Dask cluster of this many processes; 0 = one per core; 1 = in this process, no Dask.")
 @click.option("--scheduler", help="Send the tracking to an existing Dask cluster (tcp://HOST:PORT); videos must be on a path the workers share.")
 @click.option("--force", is_flag=True, help="Track again even where a cached track exists (tracks are cached in OUT/.cache).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
@@ -339,18 +361,6 @@ def calibrate(inputs: tuple[Path, ...], board: str, square_size: float, out_json
     click.echo(f"{len(result.views_used)} views used, RMS reprojection error {result.rms_reprojection_error_px:.3f} px; wrote {out_json}")
     for name, reason in result.skipped:
         click.echo(f"skipped {name}: {reason}", err=True)
-
-
-def _register_rig() -> None:
-    from .bench import bench
-    from .rig.cli import drive, plan
-
-    cli.add_command(plan)
-    cli.add_command(drive)
-    cli.add_command(bench)
-
-
-_register_rig()
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 import time
 import uuid
 from contextlib import contextmanager
@@ -31,6 +32,7 @@ from typing import Callable, Iterator, Protocol, Sequence
 
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings, track_video
+from ..video.reader import THREADS_ENV
 from .cache import TrackCache
 
 __all__ = ["track_many", "default_workers", "ProgressFn", "DoneFn"]
@@ -193,7 +195,7 @@ def _track_on_dask(pending, settings, n_workers: int | None, scheduler: str | No
     except ImportError:  # pragma: no cover - older distributed
         from distributed.scheduler import KilledWorker
 
-    with _client(n_workers, scheduler) as client:
+    with _client(n_workers, scheduler, settings.backend) as client:
         # Longest first (file size as a proxy for frames): fewer workers
         # idle while the last long video finishes.
         order = sorted(pending, key=lambda p: -_size(p[1].video))
@@ -246,8 +248,10 @@ def _size(path) -> int:
 
 
 @contextmanager
-def _client(n_workers: int | None, scheduler: str | None) -> Iterator:
+def _client(n_workers: int | None, scheduler: str | None, settings_backend: str = "auto") -> Iterator:
     """A Dask client on a fresh local cluster or on ``scheduler``; closed on exit."""
+    import cv2
+    import dask
     from distributed import Client, LocalCluster
 
     # CRITICAL, not ERROR: a video that fails is an expected outcome that
@@ -262,15 +266,33 @@ def _client(n_workers: int | None, scheduler: str | None) -> Iterator:
     cluster = client = None
     try:
         if scheduler is None:
-            cluster = LocalCluster(
-                n_workers=n_workers, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=quiet,
-                # One OpenCV thread per worker, as Dask already does for BLAS/OpenMP:
-                # the parallelism is across videos, and OpenCV's thread pool
-                # on the small search windows costs ~9 % more CPU than it
-                # saves. The tracks are the same bytes either way (tested).
-                env={"OPENCV_FOR_THREADS_NUM": "1"},
-            )
+            # Each worker is one core's share: its decoder and OpenCV keep to
+            # cores / workers threads, as Dask keeps BLAS/OpenMP to one thread
+            # per worker (more would fight over the same cores). The tracks are
+            # the same bytes whatever the thread count (tested).
+            share = str(max(1, default_workers() // max(1, n_workers or 1)))
+            # Workers forked from this process (Linux) start in ~0.2 s, warm:
+            # servoscope, numba's compiled kernels and OpenCV are already
+            # loaded; spawned ones took 2–3 s to start and import, which was
+            # most of a 2-core machine's gain. Nothing of this process is used
+            # by a worker but the imported code, and no decoder thread runs
+            # while the cluster starts. A CUDA context does not survive a fork.
+            method = "fork" if sys.platform.startswith("linux") and settings_backend != "cuda" else "spawn"
+            # OpenCV's thread pool does not survive a fork: a child that touches a pool
+            # this process has used hangs (measured: in pthread_cond_destroy). With one
+            # thread the pool has no threads of its own, so it is set to one while the
+            # workers are forked, and given back after.
+            opencv_threads = cv2.getNumThreads()
+            cv2.setNumThreads(1)
+            try:
+                with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+                    cluster = LocalCluster(
+                        n_workers=n_workers, threads_per_worker=1, processes=True,
+                        dashboard_address=None, silence_logs=quiet,
+                        env={"OPENCV_FOR_THREADS_NUM": share, THREADS_ENV: share},
+                    )
+            finally:
+                cv2.setNumThreads(opencv_threads)
             client = Client(cluster)
         else:
             try:

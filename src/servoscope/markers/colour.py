@@ -36,23 +36,21 @@ def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, floa
     text = spec.strip().lower()
     if text == AUTO:
         return AUTO
-    # Deferred: matplotlib (for its CSS colour table) costs 0.1 s of start-up
-    # that `servoscope track` would otherwise pay on every run.
+    if text.startswith("#"):
+        # Hex is parsed here: importing matplotlib for it would cost 0.2 s of
+        # every `servoscope track`'s start-up.
+        if len(text) != 7 or not all(c in "0123456789abcdef" for c in text[1:]):
+            raise ServoscopeError(
+                f"{what}: {spec!r} is not a colour (use \"#rrggbb\", a CSS colour name, or \"auto\")")
+        return tuple(float(int(text[i:i + 2], 16)) for i in (1, 3, 5))  # type: ignore[return-value]
+    # Deferred: matplotlib holds the CSS colour table; only names need it.
     from matplotlib import colors as mcolors
 
-    try:
-        if text.startswith("#"):
-            if len(text) != 7:
-                raise ValueError
-            rgb = mcolors.to_rgb(text)
-        elif text in mcolors.CSS4_COLORS:
-            rgb = mcolors.to_rgb(mcolors.CSS4_COLORS[text])
-        else:
-            raise ValueError
-    except ValueError:
+    if text not in mcolors.CSS4_COLORS:
         raise ServoscopeError(
             f"{what}: {spec!r} is not a colour (use \"#rrggbb\", a CSS colour name, or \"auto\")"
         ) from None
+    rgb = mcolors.to_rgb(mcolors.CSS4_COLORS[text])
     return tuple(float(c) * 255.0 for c in rgb)  # type: ignore[return-value]
 
 

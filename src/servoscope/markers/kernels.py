@@ -28,7 +28,16 @@ the frame to RGB: for each marker, inside its tracking window,
    Luma's weight is kept only where ``α_Y`` agrees with ``α_C`` (within
    ``agree`` ± 0.1, a ramp): a background pixel whose luma happens to equal
    the marker's (sky next to a green sticker, where the ring's bin mixes
-   sky and blade) is then told by its chroma;
+   sky and blade) is then told by its chroma. The two are compared at
+   *chroma's* resolution: ``α_Y`` is averaged over the 2×2 blocks the
+   writer averaged the chroma over and read bilinearly at chroma's siting,
+   exactly as ``α_C``'s chroma was (chroma is linear in the mixture, so
+   where luma's background is right the two agree to noise, also across
+   the sticker's edge). Compared pixel by pixel, the half-resolution
+   chroma's smear made them disagree by 0.2–0.5 all along the edge, so
+   luma was dropped exactly where its sharpness matters; a marker whose
+   chroma contrast is weak and luma contrast strong (magenta on a dark
+   blade) then took the codec's chroma error in full;
 4. accumulate the weighted moments m00, m10, m01, the second moments and
    the noise-propagation sums, and recentre (``iterations`` passes).
 
@@ -284,7 +293,9 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
             aC = np.minimum(np.maximum((cU * (sU - bU) + cV * (sV - bV)) / np.where(cc > 0.0, cc, 1.0), lo), hi)
             aY = np.where(cY == 0.0, 0.0, aY)
             aC = np.where(cc > 0.0, aC, 0.0)
-            trust = np.minimum(np.maximum((prm[P.AGREE] + 0.1 - np.abs(aY - aC)) / 0.2, 0.0), 1.0)
+            aref = _luma_alpha_at_chroma_res_np(prm, pY, px, py, dx, dym, d2, radius, my, row_off, row_step,
+                                                U.shape, px[sup], py[sup], aY)
+            trust = np.minimum(np.maximum((prm[P.AGREE] + 0.1 - np.abs(aref - aC)) / 0.2, 0.0), 1.0)
             gy = wy * cY * cY * trust
             a = (gy * aY + cc * aC) / np.where(gy + cc > 0.0, gy + cc, 1.0)
             wgt = np.where(ok, a, flag)
@@ -312,6 +323,60 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
         out[Q.VAR_Y] = (var_a * ey * ey).sum() / (m00 * m00)
         out[Q.CONTRAST] = math.sqrt(c2 / sdx.size) if sdx.size else 0.0
         cx, cy = out[Q.X], out[Q.Y]
+
+
+def _luma_alpha_at_chroma_res_np(prm, pY, px, py, dx, dym, d2, radius, my, row_off, row_step, chroma_shape,
+                                  sx, sy, own):
+    """Luma's α resampled as the chroma is: 2×2 block means, then bilinear at chroma's siting.
+
+    ``pY, px, py, dx, dym, d2`` are the box's pixels (as in :func:`_marker_np`); the blocks are
+    filled from its pixels within ``radius`` + 3 px of the centre (every block a support pixel's
+    bilinear interpolation reads lies within 2√2 px of it). Returns the value at the support
+    pixels ``(sx, sy)``; ``own`` (their own α_Y) where none of the four blocks has a pixel.
+    """
+    hc, wc = chroma_shape
+    scale = N_BINS / (2.0 * math.pi)
+    foot = d2 <= (radius + 3.0) ** 2
+    t = (_atan2_np(dym[foot], dx[foot]) + math.pi) * scale - 0.5
+    kf = np.floor(t)
+    f = t - kf
+    k0 = kf.astype(np.int64) % N_BINS
+    k1 = (k0 + 1) % N_BINS
+    bY = my[k0] * (1.0 - f) + my[k1] * f
+    cY = prm[P.YM] - bY
+    aY = np.minimum(np.maximum((pY[foot] - bY) / np.where(cY == 0.0, 1.0, cY), prm[P.ALPHA_LO]), prm[P.ALPHA_HI])
+    aY = np.where(cY == 0.0, 0.0, aY)
+    bi = px[foot].astype(np.int64) // 2
+    bj = (row_off + row_step * py[foot].astype(np.int64)) // 2
+    i_lo, j_lo = int(bi.min()), int(bj.min())
+    gs = np.zeros((int(bj.max()) - j_lo + 1, int(bi.max()) - i_lo + 1))
+    gn = np.zeros_like(gs)
+    # np.add.at adds in the given (raster) order, as the compiled kernel does.
+    np.add.at(gs, (bj - j_lo, bi - i_lo), aY)
+    np.add.at(gn, (bj - j_lo, bi - i_lo), 1.0)
+    gs = np.where(gn > 0.0, gs / np.where(gn > 0.0, gn, 1.0), 0.0)
+    cx = (sx - 0.5) * 0.5
+    cy = (row_off + row_step * sy - 0.5) * 0.5
+    i0 = np.floor(cx)
+    j0 = np.floor(cy)
+    fx = cx - i0
+    fy = cy - j0
+    i0 = i0.astype(np.int64)
+    j0 = j0.astype(np.int64)
+    ia = np.clip(i0, 0, wc - 1) - i_lo
+    ib = np.clip(i0 + 1, 0, wc - 1) - i_lo
+    ja = np.clip(j0, 0, hc - 1) - j_lo
+    jb = np.clip(j0 + 1, 0, hc - 1) - j_lo
+    num = np.zeros(sx.size)
+    wsum = np.zeros(sx.size)
+    for j, i, w in ((ja, ia, (1.0 - fx) * (1.0 - fy)), (ja, ib, fx * (1.0 - fy)), (jb, ia, (1.0 - fx) * fy),
+                    (jb, ib, fx * fy)):
+        inside = (j >= 0) & (j < gs.shape[0]) & (i >= 0) & (i < gs.shape[1])
+        jc, ic = np.where(inside, j, 0), np.where(inside, i, 0)
+        have = inside & (gn[jc, ic] > 0.0)
+        num = num + np.where(have, w * gs[jc, ic], 0.0)
+        wsum = wsum + np.where(have, w, 0.0)
+    return np.where(wsum > 0.0, num / np.where(wsum > 0.0, wsum, 1.0), own)
 
 
 def _fill_bins_np(cnt, sy, su, sv):
@@ -368,8 +433,21 @@ def track_frame_numpy(Y, U, V, row_off, row_step, params, led, out, led_out) -> 
 # numba
 # ---------------------------------------------------------------------------
 @njit(cache=True, nogil=True, inline="always")
-def _chroma_at(plane, x, y, row_off, row_step):
-    hc, wc = plane.shape
+def _bin_pair(kf):
+    """Bins k, k+1 (mod N_BINS) around an interpolation position; ``kf`` in [-1, N_BINS - 1] (no modulo)."""
+    k0 = int(kf)
+    if k0 < 0:
+        k0 += N_BINS
+    k1 = k0 + 1
+    if k1 == N_BINS:
+        k1 = 0
+    return k0, k1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _chroma_uv_at(U, V, x, y, row_off, row_step):
+    """Bilinear Cb and Cr at luma pixel (x, y), as :func:`_chroma_np` (sample positions computed once)."""
+    hc, wc = U.shape
     cx = (x - 0.5) * 0.5
     cy = (row_off + row_step * y - 0.5) * 0.5
     i0f = math.floor(cx)
@@ -382,9 +460,43 @@ def _chroma_at(plane, x, y, row_off, row_step):
     ib = min(max(i0 + 1, 0), wc - 1)
     ja = min(max(j0, 0), hc - 1)
     jb = min(max(j0 + 1, 0), hc - 1)
-    top = float(plane[ja, ia]) * (1.0 - fx) + float(plane[ja, ib]) * fx
-    bot = float(plane[jb, ia]) * (1.0 - fx) + float(plane[jb, ib]) * fx
-    return top * (1.0 - fy) + bot * fy
+    top = float(U[ja, ia]) * (1.0 - fx) + float(U[ja, ib]) * fx
+    bot = float(U[jb, ia]) * (1.0 - fx) + float(U[jb, ib]) * fx
+    u = top * (1.0 - fy) + bot * fy
+    top = float(V[ja, ia]) * (1.0 - fx) + float(V[ja, ib]) * fx
+    bot = float(V[jb, ia]) * (1.0 - fx) + float(V[jb, ib]) * fx
+    return u, top * (1.0 - fy) + bot * fy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _block_bilinear(gs, gn, gi0, gj0, x, y, row_off, row_step, hc, wc, own):
+    """Block means ``gs`` (``gn`` pixels each) read as :func:`_chroma_uv_at` reads a plane.
+
+    ``own`` where none of the four blocks has a pixel.
+    """
+    cx = (x - 0.5) * 0.5
+    cy = (row_off + row_step * y - 0.5) * 0.5
+    i0f = math.floor(cx)
+    j0f = math.floor(cy)
+    fx = cx - i0f
+    fy = cy - j0f
+    i0 = int(i0f)
+    j0 = int(j0f)
+    ia = min(max(i0, 0), wc - 1) - gi0
+    ib = min(max(i0 + 1, 0), wc - 1) - gi0
+    ja = min(max(j0, 0), hc - 1) - gj0
+    jb = min(max(j0 + 1, 0), hc - 1) - gj0
+    nj, ni = gs.shape
+    num = 0.0
+    wsum = 0.0
+    for q in range(4):
+        j = ja if q < 2 else jb
+        i = ia if q % 2 == 0 else ib
+        w = (fx if q % 2 == 1 else 1.0 - fx) * (fy if q >= 2 else 1.0 - fy)
+        if 0 <= j < nj and 0 <= i < ni and gn[j, i] > 0.0:
+            num = num + w * gs[j, i]
+            wsum = wsum + w
+    return num / wsum if wsum > 0.0 else own
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -500,15 +612,15 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                 if d2 <= r2:
                     buf[ns, 0] = dx
                     buf[ns, 1] = dy
+                    buf[ns, 7] = fx
+                    buf[ns, 8] = fy
                     buf[ns, 2] = float(Y[y, x])
-                    buf[ns, 3] = _chroma_at(U, fx, fy, row_off, row_step)
-                    buf[ns, 4] = _chroma_at(V, fx, fy, row_off, row_step)
+                    buf[ns, 3], buf[ns, 4] = _chroma_uv_at(U, V, fx, fy, row_off, row_step)
                     ns += 1
                     continue
                 if d2 < r_in2 or d2 > r_out2:
                     continue
-                uv = _chroma_at(U, fx, fy, row_off, row_step)
-                vv = _chroma_at(V, fx, fy, row_off, row_step)
+                uv, vv = _chroma_uv_at(U, V, fx, fy, row_off, row_step)
                 if _is_class(prm, uv, vv):
                     continue
                 yv = float(Y[y, x])
@@ -536,6 +648,44 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                 my[k] = bsy[src] / cnt[src]
                 mu[k] = bsu[src] / cnt[src]
                 mv[k] = bsv[src] / cnt[src]
+        gi0 = ax0 // 2
+        gj0 = (row_off + row_step * ay0) // 2
+        gs = np.zeros((1, 1))
+        gn = np.zeros((1, 1))
+        if have_bg:
+            # Luma's α in 2×2 blocks, as the chroma was sampled (see _luma_alpha_at_chroma_res_np).
+            gs = np.zeros(((row_off + row_step * (ay1 - 1)) // 2 - gj0 + 1, (ax1 - 1) // 2 - gi0 + 1))
+            gn = np.zeros_like(gs)
+            rf = radius + 3.0
+            rf2 = rf * rf
+            s = 0
+            for y in range(ay0, ay1):
+                dym = (float(y) - cy) * row_step
+                gj = (row_off + row_step * y) // 2 - gj0
+                for x in range(ax0, ax1):
+                    dx = float(x) - cx
+                    d2 = dx * dx + dym * dym
+                    if d2 > rf2:
+                        continue
+                    t = (_atan2(dym, dx) + math.pi) * scale - 0.5
+                    if d2 <= r2:
+                        buf[s, 9] = t  # the support pixels come in the sweep's (raster) order
+                        s += 1
+                    kf = math.floor(t)
+                    f = t - kf
+                    k0, k1 = _bin_pair(kf)
+                    bY = my[k0] * (1.0 - f) + my[k1] * f
+                    cY = prm[4] - bY
+                    aY = 0.0
+                    if cY != 0.0:
+                        aY = min(max((float(Y[y, x]) - bY) / cY, prm[19]), prm[20])
+                    gi = (x >> 1) - gi0  # x >= 0: a shift is its floor half
+                    gs[gj, gi] += aY
+                    gn[gj, gi] += 1.0
+            for j in range(gs.shape[0]):
+                for i in range(gs.shape[1]):
+                    if gn[j, i] > 0.0:
+                        gs[j, i] /= gn[j, i]
         m00 = 0.0
         m10 = 0.0
         m01 = 0.0
@@ -552,11 +702,10 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
             unmixed = False
             a = 0.0
             if have_bg:
-                t = (_atan2(dy * row_step, dx) + math.pi) * scale - 0.5
+                t = buf[s, 9]
                 kf = math.floor(t)
                 f = t - kf
-                k0 = int(kf) % N_BINS
-                k1 = (k0 + 1) % N_BINS
+                k0, k1 = _bin_pair(kf)
                 bY = my[k0] * (1.0 - f) + my[k1] * f
                 bU = mu[k0] * (1.0 - f) + mu[k1] * f
                 bV = mv[k0] * (1.0 - f) + mv[k1] * f
@@ -573,7 +722,8 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                     aC = 0.0
                     if cc > 0.0:
                         aC = min(max((cU * (uv - bU) + cV * (vv - bV)) / cc, prm[19]), prm[20])
-                    trust = min(max((prm[11] + 0.1 - abs(aY - aC)) / 0.2, 0.0), 1.0)
+                    aref = _block_bilinear(gs, gn, gi0, gj0, buf[s, 7], buf[s, 8], row_off, row_step, hc, wc, aY)
+                    trust = min(max((prm[11] + 0.1 - abs(aref - aC)) / 0.2, 0.0), 1.0)
                     gy = wy * cY * cY * trust
                     a = (gy * aY + cc * aC) / (gy + cc) if gy + cc > 0.0 else 0.0
                     va = (wy * wy * cY * cY * prm[17] + (cU * cU + cV * cV) * prm[18]) / (den * den)
@@ -657,7 +807,7 @@ def track_frame_numba(Y, U, V, row_off, row_step, params, led, out, led_out):
     for k in range(params.shape[0]):
         side = 2 * int(params[k, 12] + 1.0 + params[k, 13]) + 4
         size = max(size, side * side)
-    buf = np.empty((size, 7))
+    buf = np.empty((size, 10))
     for k in range(params.shape[0]):
         _marker_nb(Y, U, V, int(row_off), int(row_step), params[k], out[k], buf)
     led_level_numba(Y, led, out, led_out)

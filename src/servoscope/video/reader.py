@@ -7,6 +7,8 @@ variable-frame-rate phones have no nominal rate at all.
 
 from __future__ import annotations
 
+import os
+
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -289,19 +291,34 @@ def i420_of_planes(y: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 #: Decoder threads when a caller passes 0: 0 lets FFmpeg choose (cores + 1). A process that runs
-#: one video per core (``bench``'s one-core runs, a campaign's worker pool) sets 1 here so that
-#: its decoders do not compete with each other for the same cores.
+#: one video per core (``bench``'s one-core runs) sets 1 here so that its decoders do not compete
+#: with each other for the same cores.
 DECODER_THREADS = 0
+
+#: Environment variable with the threads one video may use in this process (decoder threads,
+#: OpenCV's pool): what a campaign's Dask workers are given (cores / workers), as Dask gives
+#: them one BLAS/OpenMP thread each; ``dask worker`` processes started by hand may set it too.
+THREADS_ENV = "SERVOSCOPE_THREADS"
+
+
+def thread_budget() -> int:
+    """Threads one video may use in this process: ``SERVOSCOPE_THREADS``, or 0 (no limit set)."""
+    text = os.environ.get(THREADS_ENV, "").strip()
+    try:
+        return max(0, int(text)) if text else 0
+    except ValueError:
+        return 0
 
 
 def configure_decoder(stream, threads: int = 0) -> None:
     """The decoder settings of every servoscope decoding loop (and of ``bench``'s decode-only run).
 
     Frame and slice threading (``"AUTO"``); ``threads`` decoder threads, 0
-    meaning :data:`DECODER_THREADS`.
+    meaning :data:`DECODER_THREADS`, then ``SERVOSCOPE_THREADS``, then
+    FFmpeg's own choice.
     """
     stream.thread_type = "AUTO"
-    threads = threads or DECODER_THREADS
+    threads = threads or DECODER_THREADS or thread_budget()
     if threads:
         stream.codec_context.thread_count = threads
 
