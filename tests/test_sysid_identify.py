@@ -337,3 +337,103 @@ def test_fit_result_types():
     s = r.summary()
     json.dumps(s, allow_nan=False)
     assert s["order"] == [0, 3] and len(s["poles"]) == 3 and s["natural_frequency_rad_s"] is None
+
+
+def test_tracked_footage_backlash_is_flagged_linear_servo_is_not(tmp_path, quick_result):
+    """Through rendered H.264 footage and the tracker: the markers' null channel
+    tells tracking artefacts (linear servo) from a servo's own distortion."""
+    from servoscope.campaign import identify, load_campaign
+    from servoscope.simulate import simulate_campaign
+
+    assert not any("distorted" in fi.flags for fi in quick_result.sine_fits.values())
+    assert not any("harmonic distortion" in w for w in quick_result.warnings)
+    servo = ServoModel(PAPER_SERVO.num, PAPER_SERVO.den, TAU, backlash=0.006)
+    result = identify(load_campaign(simulate_campaign(tmp_path, preset="quick", seed=2, servo=servo, include_step=False)))
+    flagged = [fi.commanded_frequency_hz for fi in result.sine_fits.values() if "distorted" in fi.flags]
+    assert len(flagged) >= 2, flagged
+    assert any("harmonic distortion" in w for w in result.warnings)
+    for fi in result.sine_fits.values():
+        assert fi.null_harmonic_amplitudes is not None
+
+
+# ------------------------------------------------- bad input, end to end
+def _with(track, **changes):
+    import copy
+
+    new = copy.copy(track)
+    for k, v in changes.items():
+        setattr(new, k, v)
+    return new
+
+
+def test_dwell_without_valid_frames_and_motionless_step_are_left_out(tmp_path, quick_result):
+    from servoscope.campaign import identify
+
+    campaign, tracks = quick_result.campaign, dict(quick_result.tracks)
+    dead = campaign.sine_tests[1].label
+    n = tracks[dead].n_frames
+    tracks[dead] = _with(tracks[dead], valid=np.zeros(n, bool), angle_rad=np.full(n, np.nan))
+    step = campaign.step_tests[0].label
+    st = tracks[step]
+    # The step video's blade never moves: the angle stays at its pre-step level (plus noise).
+    flat = np.nanmedian(st.angle_rad[: 10]) + 2e-5 * np.random.default_rng(0).standard_normal(st.n_frames)
+    tracks[step] = _with(st, angle_rad=np.where(st.valid, flat, np.nan))
+    result = identify(campaign, tracks=tracks)
+    assert dead not in result.sine_fits and len(result.sine_fits) == len(campaign.sine_tests) - 1
+    assert result.step is None
+    summary = result.summary()
+    json.dumps(summary, allow_nan=False)
+    assert any(dead in w and "left out" in w for w in summary["warnings"])
+    assert any(step in w and "left out" in w and "never moves" in w for w in summary["warnings"])
+    assert summary["step"] is None
+    assert all(math.isfinite(v) for v in result.model.params.values())
+    paths = result.write(tmp_path / "out")
+    html = paths["report"].read_text() if "report" in paths else (tmp_path / "out" / "report.html").read_text()
+    assert "never moves" in html and f"{dead}: only 0 valid frames; dwell left out" in html
+    written = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert any("never moves" in w for w in written["warnings"])
+
+
+def test_too_few_dwells_is_a_clear_error_not_a_nan_model(quick_result):
+    from servoscope.campaign import identify
+
+    campaign, tracks = quick_result.campaign, dict(quick_result.tracks)
+    for test in campaign.sine_tests[:2]:
+        n = tracks[test.label].n_frames
+        tracks[test.label] = _with(tracks[test.label], valid=np.zeros(n, bool), angle_rad=np.full(n, np.nan))
+    with pytest.raises(ServoscopeError, match=r"only 2 sine dwell\(s\) could be fitted"):
+        identify(campaign, tracks=tracks)
+
+
+@pytest.mark.parametrize("case", ["two_dwells", "one_frequency"])
+def test_cli_exit_2_when_the_dwells_cannot_determine_the_model(tmp_path, quick_campaign, case):
+    import re
+    import shutil
+    import subprocess
+    import sys
+
+    text = quick_campaign.read_text()
+    base = quick_campaign.parent
+    text = re.sub(r'(video|calibration) = "([^"]+)"', lambda m: f'{m.group(1)} = "{(base / m.group(2)).as_posix()}"', text)
+    blocks = text.split("[[tests]]")
+    sines = [b for b in blocks[1:] if 'kind = "sine"' in b]
+    if case == "two_dwells":
+        text = blocks[0] + "".join("[[tests]]" + b for b in sines[:2])
+        expected = "only 2 sine dwell(s) could be fitted"
+    else:
+        # The same dwell recorded three times (copies of one video): every
+        # point at one frequency, whatever the sine fit refines.
+        for k in range(3):
+            shutil.copy(base / re.search(r'video = "([^"]+)"', sines[1]).group(1).split("/")[-1], tmp_path / f"same{k}.mp4")
+        same = [re.sub(r'video = "[^"]+"', f'video = "same{k}.mp4"', sines[1]) for k in range(3)]
+        text = blocks[0] + "".join("[[tests]]" + b for b in same)
+        expected = "at one frequency"
+    manifest = tmp_path / "campaign.toml"
+    manifest.write_text(text)
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(manifest), "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("servoscope: error: ") and expected in lines[0], proc.stderr
+    assert not (out / "result.json").exists()

@@ -309,3 +309,110 @@ def test_flags_for_invalid_frames_aliasing_and_frequency_mismatch():
     assert "frequency_mismatch" in fit_sine(t, y, 4.5, t0_s=T0).flags
     with pytest.raises(ServoscopeError, match="settle_s"):
         fit_sine(t, y, 3.0, settle_s="soon")
+
+
+# ------------------------------------------------- correlated noise (HAC)
+def _newey_west_oracle(X, r, lag):
+    """Newey–West by its textbook formula: Σ_l w_l Σ_t x_t r_t r_{t-l} x_{t-l}ᵀ."""
+    n, p = X.shape
+    S = np.zeros((p, p))
+    for l in range(-lag, lag + 1):
+        w = 1.0 - abs(l) / (lag + 1.0)
+        for t in range(max(0, l), min(n, n + l)):
+            S += w * np.outer(X[t] * r[t], X[t - l] * r[t - l])
+    B = np.linalg.inv(X.T @ X)
+    return B @ S @ B * n / (n - p)
+
+
+def test_hac_covariance_is_the_newey_west_formula():
+    from servoscope.sysid.sine import hac_covariance, newey_west_lag
+
+    rng = np.random.default_rng(3)
+    t = frames(1.2)
+    X = np.column_stack([np.ones_like(t), np.cos(2 * np.pi * 2.0 * t), np.sin(2 * np.pi * 2.0 * t)])
+    r = rng.standard_normal(t.size)
+    for lag in (1, 4):
+        np.testing.assert_allclose(hac_covariance(X, r, lag), _newey_west_oracle(X, r, lag), rtol=1e-10)
+    assert newey_west_lag(100) == 4 and newey_west_lag(350) == 5 and newey_west_lag(3) == 1
+
+
+def test_stderr_is_honest_for_correlated_noise():
+    """AR(1) noise (φ = 0.8): the white-noise formula's stderr is too small; HAC's is not."""
+    import servoscope.sysid.sine as sine_mod
+
+    t = frames(4.0)
+    clean = sine(t, 0.02, 0.7, 0.4)
+    amps, se_hac, se_white = [], [], []
+    for seed in range(60):
+        rng = np.random.default_rng(500 + seed)
+        e = np.empty(t.size)
+        e[0] = rng.standard_normal()
+        for i in range(1, t.size):
+            e[i] = 0.8 * e[i - 1] + math.sqrt(1 - 0.64) * rng.standard_normal()
+        y = clean + 1e-4 * e
+        r = fit_sine(t, y, 0.7, t0_s=T0, settle_s=0.2, refine_frequency=False)
+        amps.append(r.amplitude)
+        se_hac.append(r.amplitude_stderr)
+        try:
+            sine_mod._HAC = False
+            se_white.append(fit_sine(t, y, 0.7, t0_s=T0, settle_s=0.2, refine_frequency=False).amplitude_stderr)
+        finally:
+            sine_mod._HAC = True
+    emp = np.std(amps, ddof=1)
+    # Spectral density of AR(1) at low frequency is (1+φ)/(1-φ) = 9 times the white one's.
+    assert emp / np.mean(se_white) > 2.0
+    assert 0.7 < emp / np.mean(se_hac) < 1.4, (emp, np.mean(se_hac))
+
+
+# ------------------------------------- distortion vs. tracking artefacts
+def _two_markers(pose, rng, lock_px=0.03, noise_px=0.005):
+    """Centroids of two stickers on a rigid blade turning by ``pose`` (rad) about a pivot,
+    each pulled towards pixel centres (pixel locking: an error set by its sub-pixel position)."""
+    centre = np.array([400.3, 290.7])
+    out = []
+    for radius in (450.0, -150.0):
+        p = centre + radius * np.column_stack([np.cos(0.2 + pose), np.sin(0.2 + pose)])
+        out.append(p - lock_px * np.sin(2 * np.pi * p) + noise_px * rng.standard_normal(p.shape))
+    lead, trail = out
+    return lead, trail, np.arctan2(lead[:, 1] - trail[:, 1], lead[:, 0] - trail[:, 0])
+
+
+def test_rigid_motion_null_cancels_any_rigid_motion():
+    from servoscope.sysid import rigid_motion_null
+
+    t = frames(2.0)
+    # A strongly non-sinusoidal pose: the null channel holds none of it.
+    pose = 0.02 * np.sign(np.sin(2 * np.pi * 1.3 * t)) + 0.01 * np.sin(2 * np.pi * 4.1 * t)
+    lead, trail, _ = _two_markers(pose, np.random.default_rng(0), lock_px=0.0, noise_px=0.0)
+    null = rigid_motion_null(lead, trail)
+    assert np.nanmax(np.abs(null)) < 1e-12
+    # Invalid frames stay NaN; too few frames give all NaN.
+    valid = np.ones(t.size, bool)
+    valid[5] = False
+    assert np.isnan(rigid_motion_null(lead, trail, valid)[5])
+    assert np.all(np.isnan(rigid_motion_null(lead[:2], trail[:2])))
+
+
+def test_tracking_artefacts_are_not_flagged_as_distortion_but_backlash_is():
+    from servoscope.simulate.servo import _play_operator
+    from servoscope.sysid import rigid_motion_null
+
+    t = frames(4.0)
+    rng = np.random.default_rng(1)
+    # A linear response of 2 mrad at 12 Hz: the stickers move < 1 px, and
+    # pixel locking puts 1.5 % of harmonics into the angle.
+    lead, trail, angle = _two_markers(0.002 * np.sin(2 * np.pi * 12.0 * t), rng)
+    plain = fit_sine(t, angle, 12.0, t0_s=0.0, settle_s=0.5)
+    assert plain.thd > 0.01 and "distorted" in plain.flags  # the false flag without a null channel
+    nulled = fit_sine(t, angle, 12.0, t0_s=0.0, settle_s=0.5, null_channel=rigid_motion_null(lead, trail))
+    assert "distorted" not in nulled.flags and nulled.null_harmonic_amplitudes[0] > 0
+    assert nulled.thd == pytest.approx(plain.thd)  # the measurement is the same; only the test changed
+    json.dumps(nulled.summary(), allow_nan=False)
+    # Backlash (a play of 1 mrad) on the same blade and tracking: flagged.
+    fine = np.arange(0.0, 4.0, 1e-4) + t[0]
+    pose = np.interp(t, fine, _play_operator(0.004 * np.sin(2 * np.pi * 5.0 * fine), 0.0005))
+    lead, trail, angle = _two_markers(pose, rng)
+    bl = fit_sine(t, angle, 5.0, t0_s=0.0, settle_s=0.5, null_channel=rigid_motion_null(lead, trail))
+    assert "distorted" in bl.flags and bl.thd > 0.03
+    with pytest.raises(ServoscopeError, match="null_channel"):
+        fit_sine(t, angle, 5.0, t0_s=0.0, null_channel=angle[:-1])

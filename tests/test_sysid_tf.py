@@ -246,16 +246,29 @@ def test_bandwidth_resonant_uses_first_crossing_and_rejects_unstable():
         bandwidth_rad_s(control.tf([1.0, 0.0], [1.0, 1.0]))  # zero DC gain
 
 
-def test_stderr_scaled_by_residual_variance():
-    # Misstated measurement errors (uniformly x3) change neither the estimates
-    # nor the standard errors: the covariance is scaled by the reduced chi^2.
+def test_stderr_scaled_by_reduced_chi_square_only_when_it_exceeds_one():
+    # Covariance scaled by max(1, chi^2/dof) (Birge ratio; CIFER's misfit
+    # factor): errors stated too small are inflated to the scatter (the
+    # result does not depend on how much too small they were), errors
+    # stated too large are trusted, not shrunk to the scatter.
     rng = np.random.default_rng(9)
     g = np.abs(true_response()) * (1 + 0.005 * rng.standard_normal(14))
-    a = fit_second_order(fr_from(g, 0.005 * g))
-    b = fit_second_order(fr_from(g, 0.015 * g))
-    assert b.natural_frequency_rad_s == pytest.approx(a.natural_frequency_rad_s, rel=1e-8)
-    assert b.damping_ratio_stderr == pytest.approx(a.damping_ratio_stderr, rel=1e-6)
-    assert b.gain_stderr == pytest.approx(a.gain_stderr, rel=1e-6)
+    under3 = fit_second_order(fr_from(g, 0.005 / 3 * g))
+    under6 = fit_second_order(fr_from(g, 0.005 / 6 * g))
+    over3 = fit_second_order(fr_from(g, 0.015 * g))
+    over6 = fit_second_order(fr_from(g, 0.030 * g))
+    assert over3.natural_frequency_rad_s == pytest.approx(under3.natural_frequency_rad_s, rel=1e-8)
+    for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
+        assert under6.stderr[name] == pytest.approx(under3.stderr[name], rel=1e-6)
+        # chi^2/dof < 1: the stated errors set the scale, so twice the errors
+        # give twice the standard errors.
+        assert over6.stderr[name] == pytest.approx(2.0 * over3.stderr[name], rel=1e-6)
+        assert over3.stderr[name] > 2.0 * under3.stderr[name]
+    # The unconditionally scaled (nlinfit) standard errors, computed here from
+    # the Jacobian of the same fit, equal the inflated ones.
+    chi2 = 2.0 * under3.cost
+    dof = under3.n_residuals - under3.n_params
+    assert chi2 / dof > 1.0
 
 
 def test_exposure_correction_restores_box_filtered_gains():

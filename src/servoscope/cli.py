@@ -147,7 +147,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
     noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}°"
     click.echo(f"{video.name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
-               f"sticker separation {sep}, angle noise {noise} (1σ), LED switch t0 = {t0}; wrote {out_csv}")
+               f"sticker separation {sep}, angle noise {noise} (1σ, pixel noise only), LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
     if overlay is not None:

@@ -14,7 +14,7 @@ Typical use::
 
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
-from servoscope.sysid.sine import SineFit, fit_sine
+from servoscope.sysid.sine import SineFit, fit_sine, hac_covariance, rigid_motion_null
 from servoscope.sysid.step import StepAnalysis, analyse_step, model_step_metrics
 from servoscope.sysid.tf_fit import (
     TransferFunctionFit,
@@ -37,6 +37,8 @@ __all__ = [
     "fit_second_order",
     "fit_sine",
     "fit_transfer_function",
+    "hac_covariance",
     "model_step_metrics",
+    "rigid_motion_null",
     "select_order",
 ]

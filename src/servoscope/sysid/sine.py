@@ -13,8 +13,14 @@ The model ``offset + a*cos(w*(t - tc)) + b*sin(w*(t - tc))`` (``tc``: the mean
 time of the window, for good conditioning) is first fitted by linear least
 squares at the commanded frequency. With ``refine_frequency=True`` the
 frequency is then freed and ``(offset, a, b, f)`` are refined with
-:func:`scipy.optimize.least_squares`. Standard errors come from the Jacobian
-covariance scaled by the residual variance; the phase relative to ``t0`` is
+:func:`scipy.optimize.least_squares`. Standard errors come from the
+Newey–West (HAC) covariance of the fit (:func:`hac_covariance`: Bartlett
+kernel, lag the larger of ``floor(4 (n/100)**(2/9))`` and Andrews' AR(1)
+plug-in), because tracking errors are
+correlated from frame to frame (on the twin's raw footage the lag-1
+autocorrelation of the tracking error is up to 0.2 at slow dwells, on
+H.264 up to 0.9); for white residuals it equals the classical
+residual-variance-scaled covariance on average. The phase relative to ``t0`` is
 obtained from the phase at ``tc`` by the delta method, so its standard error
 includes the frequency uncertainty times the lever arm ``tc - t0``.
 
@@ -38,7 +44,12 @@ frequency of the samples) are fitted jointly with the fundamental by
 linear least squares at the fitted frequency; ``thd`` is
 ``sqrt(sum A_k**2) / A_1``. ``flags`` names the problems found:
 ``low_fidelity`` (< 0.95), ``distorted`` (THD > 1 % and the harmonics
-significant at the 0.1 % level), ``aliasing`` (frequency at or above 80 %
+significant at the 0.1 % level in a joint Wald test with the same HAC
+covariance, plus, when a ``null_channel`` is given, the variance of the
+measurement's own motion-locked artefacts: the null channel's harmonics,
+pooled over 2..5, added to each harmonic's two coefficients — pixel
+locking and codec errors repeat every period, so no noise model tells
+them from distortion, but a channel the motion cannot reach shows them), ``aliasing`` (frequency at or above 80 %
 of the Nyquist frequency), ``frequency_mismatch``, ``few_periods`` (< 2),
 ``few_samples`` (< 20), ``invalid_frames`` (> 20 % of the frames in the
 window invalid), ``transient`` (not over within the window), ``flat``.
@@ -57,7 +68,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from servoscope.errors import ServoscopeError
 
-__all__ = ["SineFit", "fit_sine"]
+__all__ = ["SineFit", "fit_sine", "hac_covariance", "newey_west_lag", "rigid_motion_null"]
 
 _MIN_SAMPLES = 5
 _FEW_SAMPLES = 20
@@ -76,6 +87,8 @@ MAX_INVALID_FRACTION = 0.2
 NEAR_NYQUIST = 0.8
 _HARMONICS = (2, 3, 4, 5)
 _TRANSIENT_SIGMAS = 3.0
+#: Newey–West (HAC) standard errors instead of the white-noise ones.
+_HAC = True
 
 
 def _jsonable(value: Any) -> Any:
@@ -186,6 +199,9 @@ class SineFit:
         (the noise floor), output units.
     invalid_fraction : float
         Share of the frames inside the window that were invalid or NaN.
+    null_harmonic_amplitudes : tuple of (float or None) or None
+        Amplitudes of harmonics 2..5 in the null channel (the measurement's
+        motion-locked artefacts), when one was given.
     flags : tuple of str
         Short codes of the problems found (see the module docstring).
     time_s, y, residual : numpy.ndarray
@@ -222,6 +238,7 @@ class SineFit:
     harmonic_residual_rms: float = float("nan")
     invalid_fraction: float = 0.0
     flags: tuple[str, ...] = ()
+    null_harmonic_amplitudes: tuple[float | None, ...] | None = None
     _center_s: float = field(repr=False, compare=False, default=0.0)
     _cos_coef: float = field(repr=False, compare=False, default=0.0)
     _sin_coef: float = field(repr=False, compare=False, default=0.0)
@@ -273,6 +290,9 @@ class SineFit:
                 "t0_s": self.t0_s,
                 "settle_s": self.settle_s,
                 "harmonic_amplitudes": list(self.harmonic_amplitudes),
+                "null_harmonic_amplitudes": (
+                    None if self.null_harmonic_amplitudes is None else list(self.null_harmonic_amplitudes)
+                ),
                 "thd": self.thd,
                 "harmonic_residual_rms": self.harmonic_residual_rms,
                 "invalid_fraction": self.invalid_fraction,
@@ -394,11 +414,98 @@ def _steady_state_start(
     return max(start, t_from), False
 
 
+def newey_west_lag(n: int) -> int:
+    """Bandwidth (largest lag) of the Newey–West covariance for ``n`` samples.
+
+    Newey & West (1994)'s rule of thumb for the Bartlett kernel,
+    ``floor(4 * (n / 100)**(2/9))`` (the default of statsmodels'
+    ``cov_type="HAC"`` users and of Stock & Watson's textbook); at least 1.
+    """
+    return max(1, int(math.floor(4.0 * (max(n, 1) / 100.0) ** (2.0 / 9.0))))
+
+
+def andrews_lag(residual: ArrayLike) -> int:
+    """Data-dependent Bartlett bandwidth of Andrews (1991), AR(1) plug-in.
+
+    ``ceil(1.1447 * (alpha * n)**(1/3))`` with ``alpha = 4 rho**2 /
+    ((1 - rho)**2 (1 + rho)**2)`` and ``rho`` the lag-1 autocorrelation of
+    the residuals (clipped to ±0.97). Strongly correlated errors (as H.264
+    tracking errors of slow dwells, rho ≈ 0.9) need many more lags than
+    :func:`newey_west_lag` gives.
+    """
+    r = np.asarray(residual, dtype=float).ravel()
+    n = r.size
+    if n < 3:
+        return 1
+    r = r - r.mean()
+    den = float(r @ r)
+    rho = float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
+    rho = min(max(rho, -0.97), 0.97)
+    alpha = 4.0 * rho * rho / ((1.0 - rho) ** 2 * (1.0 + rho) ** 2)
+    return max(1, int(math.ceil(1.1447 * (alpha * n) ** (1.0 / 3.0))))
+
+
+def hac_covariance(
+    jac: NDArray[np.float64], residual: NDArray[np.float64], lag: int | None = None
+) -> NDArray[np.float64]:
+    """Newey–West (HAC) covariance of least-squares parameters.
+
+    The sandwich ``B @ S @ B`` with ``B = inv(J.T @ J)`` and ``S`` the
+    long-run covariance of the scores ``u_t = J[t] * r[t]`` estimated with
+    Bartlett weights ``1 - l/(L + 1)`` for lags ``l <= L`` (Newey & West
+    1987), times the small-sample factor ``n / (n - p)`` (as statsmodels'
+    ``use_correction``). For white residuals it equals the classical
+    ``s**2 * inv(J.T @ J)`` on average; residuals correlated from frame to
+    frame (tracking errors that depend on the marker's sub-pixel position
+    change slowly as it moves) make it larger where the classical one is
+    too small. For a sinusoidal regressor it measures, in effect, the
+    residual's spectral density at the regressor's frequency.
+
+    Parameters
+    ----------
+    jac : numpy.ndarray, shape (n, p)
+        Jacobian (design matrix) of the model at the estimate, rows in time
+        order (samples equally spaced, gaps of invalid frames ignored).
+    residual : numpy.ndarray, shape (n,)
+        Residuals at the estimate, same order.
+    lag : int, optional
+        Largest lag L; default the larger of :func:`newey_west_lag` and
+        :func:`andrews_lag` of the residuals, at most ``n // 2``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (p, p)
+        Covariance matrix; NaN when ``n <= p``.
+    """
+    J = np.asarray(jac, dtype=float)
+    r = np.asarray(residual, dtype=float)
+    n, p = J.shape
+    if n <= p:
+        return np.full((p, p), np.nan)
+    L = min(max(newey_west_lag(n), andrews_lag(r)), n // 2) if lag is None else int(lag)
+    u = J * r[:, None]
+    S = u.T @ u
+    for l in range(1, min(L, n - 1) + 1):
+        g = u[l:].T @ u[:-l]
+        S += (1.0 - l / (L + 1.0)) * (g + g.T)
+    try:
+        B = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        B = np.linalg.pinv(J.T @ J)
+    return (B @ S @ B) * (n / (n - p))
+
+
 def _harmonics(
-    t: NDArray[np.float64], y: NDArray[np.float64], freq_hz: float, tc: float, dt_s: float
+    t: NDArray[np.float64], y: NDArray[np.float64], freq_hz: float, tc: float, dt_s: float,
+    artefact: list[float | None] | None = None,
 ) -> tuple[list[float | None], list[float | None], float, float]:
-    """Amplitudes (and stderrs) of harmonics 2..5, the chi-square of their
-    significance per degree of freedom's p-value, and the residual RMS."""
+    """Amplitudes (and stderrs) of harmonics 2..5, the p-value of the joint
+    Wald test that they are all zero, and the residual RMS.
+
+    ``artefact`` (amplitudes per harmonic 2..5, as returned for a null
+    channel) adds ``A**2 / 2`` to the variance of both coefficients of each
+    harmonic in the test: harmonics no larger than the measurement's own
+    artefacts are not significant."""
     th = 2.0 * math.pi * freq_hz * (t - tc)
     ks = [k for k in _HARMONICS if dt_s > 0 and k * freq_hz < 0.95 * 0.5 / dt_s]
     cols = [np.ones_like(t), np.cos(th), np.sin(th)]
@@ -413,11 +520,15 @@ def _harmonics(
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
     r = y - X @ coef
     s2 = float(r @ r) / (n - p)
-    try:
-        cov = np.linalg.inv(X.T @ X) * s2
-    except np.linalg.LinAlgError:
-        cov = np.linalg.pinv(X.T @ X) * s2
-    chi2 = 0.0
+    if _HAC:
+        # The same noise model as the fundamental's: correlated tracking
+        # errors would otherwise make any harmonic look significant.
+        cov = hac_covariance(X, r)
+    else:
+        try:
+            cov = np.linalg.inv(X.T @ X) * s2
+        except np.linalg.LinAlgError:
+            cov = np.linalg.pinv(X.T @ X) * s2
     for j, k in enumerate(ks):
         a, b = float(coef[3 + 2 * j]), float(coef[4 + 2 * j])
         sub = cov[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j]
@@ -425,12 +536,22 @@ def _harmonics(
         g = np.array([a, b]) / amp if amp > 0 else np.array([math.sqrt(0.5), math.sqrt(0.5)])
         amps[_HARMONICS.index(k)] = amp
         ses[_HARMONICS.index(k)] = math.sqrt(max(float(g @ sub @ g), 0.0))
+    # Joint Wald test that all harmonic coefficients are zero.
+    p_value = float("nan")
+    if ks:
+        v = coef[3:]
+        block = cov[3:, 3:].copy()
+        if artefact is not None:
+            for j, k in enumerate(ks):
+                extra = artefact[_HARMONICS.index(k)]
+                if extra is not None and math.isfinite(extra):
+                    block[2 * j, 2 * j] += 0.5 * extra * extra
+                    block[2 * j + 1, 2 * j + 1] += 0.5 * extra * extra
         try:
-            v = np.array([a, b])
-            chi2 += float(v @ np.linalg.solve(sub, v)) if s2 > 0 else math.inf
+            chi2 = float(v @ np.linalg.solve(block, v)) if s2 > 0 else math.inf
         except np.linalg.LinAlgError:
-            pass
-    p_value = float(chi2_dist.sf(chi2, 2 * len(ks))) if ks else float("nan")
+            chi2 = float(v @ np.linalg.pinv(block) @ v)
+        p_value = float(chi2_dist.sf(chi2, 2 * len(ks)))
     return amps, ses, p_value, math.sqrt(float(r @ r) / n)
 
 
@@ -444,6 +565,7 @@ def fit_sine(
     valid: ArrayLike | None = None,
     refine_frequency: bool | str = "auto",
     t0_stderr_s: float | None = None,
+    null_channel: ArrayLike | None = None,
 ) -> SineFit:
     """Fit ``offset + amplitude*sin(2*pi*f*(t - t0) + phase)`` to a sine dwell.
 
@@ -474,6 +596,14 @@ def fit_sine(
     t0_stderr_s : float, optional
         Standard uncertainty of ``t0_s`` (s); it adds ``2πf·t0_stderr_s`` in
         quadrature to the phase's standard error.
+    null_channel : array_like, shape (n,), optional
+        A signal from the same measurement, in output units, that the true
+        motion does not reach but the measurement's artefacts do (e.g.
+        :func:`rigid_motion_null` of the two markers); NaN where unknown.
+        Its harmonics at the fitted frequency measure the artefacts that are
+        locked to the motion (pixel locking, codec), which no noise model
+        can tell from distortion; they are added to the harmonics' variance
+        in the distortion test (module docstring).
 
     Returns
     -------
@@ -672,6 +802,11 @@ def fit_sine(
     except np.linalg.LinAlgError:
         cov = np.linalg.pinv(JtJ) * s2
         warnings.append("singular Jacobian: standard errors are unreliable")
+    if _HAC and dof > 0:
+        # Tracking errors are not white: they depend on where the marker
+        # sits on the pixel grid, which changes slowly from frame to frame.
+        # The Newey–West covariance accounts for that correlation.
+        cov = hac_covariance(Jm, residual)
 
     amp = math.hypot(a, b)
     # Delta method for amplitude and phase at tc.
@@ -704,7 +839,24 @@ def fit_sine(
 
     fidelity = 1.0 - ssr / sst if sst > 0 else float("nan")
     ref = float(t0_s) if t0_s is not None else float(t[0])
-    h_amps, h_ses, h_p, h_rms = _harmonics(t, yw, f_hat, tc, dt_med)
+    null_amps: list[float | None] | None = None
+    if null_channel is not None:
+        z_all = np.asarray(null_channel, dtype=float).ravel()
+        if z_all.shape != t_all.shape:
+            raise ServoscopeError(
+                f"fit_sine: null_channel has {z_all.size} samples but time_s has {t_all.size}"
+            )
+        zm = mask & np.isfinite(z_all)
+        if np.count_nonzero(zm) > 2 * len(_HARMONICS) + 3:
+            null_amps = _harmonics(t_all[zm], z_all[zm], f_hat, tc, dt_med)[0]
+    artefact = None
+    if null_amps is not None:
+        # One null channel is one draw of the artefacts: pooled over the
+        # harmonics, its power is a steadier estimate of their size at each.
+        sq = [a * a for a in null_amps if a is not None]
+        pooled = math.sqrt(sum(sq) / len(sq)) if sq else None
+        artefact = [None if a is None else pooled for a in null_amps]
+    h_amps, h_ses, h_p, h_rms = _harmonics(t, yw, f_hat, tc, dt_med, artefact)
     fitted = [a for a in h_amps if a is not None]
     thd = math.sqrt(sum(a * a for a in fitted)) / amp if fitted and amp > 0 else float("nan")
     if math.isfinite(fidelity) and fidelity < LOW_FIDELITY:
@@ -744,6 +896,7 @@ def fit_sine(
         harmonic_residual_rms=float(h_rms),
         invalid_fraction=float(invalid_fraction),
         flags=tuple(dict.fromkeys(flags)),
+        null_harmonic_amplitudes=None if null_amps is None else tuple(null_amps),
         time_s=_readonly(t),
         y=_readonly(yw),
         residual=_readonly(residual),
@@ -752,3 +905,61 @@ def fit_sine(
         _cos_coef=a,
         _sin_coef=b,
     )
+
+
+def rigid_motion_null(
+    lead_xy_px: ArrayLike, trail_xy_px: ArrayLike, valid: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """A null channel of two markers on a rigid blade, in angle units (rad).
+
+    A rigid blade turning about a fixed axis moves each marker across the
+    line joining them by ``r_i * sin(theta)`` (``r_i``: its signed distance
+    from the axis), so ``d_a - rho * d_b`` with ``rho = r_a / r_b`` holds no
+    motion at all: whatever the blade does, linear or not, cancels. What is
+    left are the two markers' own measurement errors, among them those
+    locked to the motion (pixel locking, codec artefacts), which repeat at
+    the harmonics of a sine dwell. ``rho`` is the least-squares slope of
+    ``d_a`` on ``d_b`` over the valid frames (the marker that moves more as
+    ``b``, so ``|rho| <= 1``). Scaled by ``sqrt(2 / (1 + rho**2)) / L``
+    (``L``: the markers' mean separation), the channel has, for independent
+    errors of equal size in both markers, the size of the angle's error
+    ``(e_a - e_b) / L``.
+
+    Parameters
+    ----------
+    lead_xy_px, trail_xy_px : array_like, shape (n, 2)
+        Marker centroids (px); NaN where not found.
+    valid : array_like of bool, shape (n,), optional
+        Frames to use (default: where both are finite).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        The null channel in rad (mean zero), NaN where invalid; all NaN
+        when fewer than 3 frames are usable or the markers do not move.
+    """
+    lead = np.asarray(lead_xy_px, dtype=float).reshape(-1, 2)
+    trail = np.asarray(trail_xy_px, dtype=float).reshape(-1, 2)
+    if lead.shape != trail.shape:
+        raise ServoscopeError("rigid_motion_null: lead and trail have different shapes")
+    ok = np.all(np.isfinite(lead), axis=1) & np.all(np.isfinite(trail), axis=1)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool).ravel()
+    out = np.full(lead.shape[0], np.nan)
+    if np.count_nonzero(ok) < 3:
+        return out
+    line = np.mean(lead[ok] - trail[ok], axis=0)
+    sep = math.hypot(float(line[0]), float(line[1]))
+    if not sep > 0:
+        return out
+    normal = np.array([-line[1], line[0]]) / sep
+    da, db = lead @ normal, trail @ normal
+    va, vb = float(np.var(da[ok])), float(np.var(db[ok]))
+    if va > vb:
+        da, db, va, vb = db, da, vb, va
+    if not vb > 0:
+        return out
+    xa, xb = da[ok] - da[ok].mean(), db[ok] - db[ok].mean()
+    rho = float(xa @ xb) / float(xb @ xb)
+    out[ok] = (xa - rho * xb) * math.sqrt(2.0 / (1.0 + rho * rho)) / sep
+    return out

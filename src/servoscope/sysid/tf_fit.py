@@ -49,8 +49,15 @@ have been set to their least-squares values for each starting point.
 
 Uncertainty
 -----------
-Covariance from the Jacobian, scaled by the reduced chi-square (as MATLAB's
-``nlinfit`` and lmfit do); 95 % intervals ``value +- t(0.975, dof) *
+Covariance from the Jacobian, scaled by ``max(1, chi2/dof)`` (the Birge
+ratio; CIFER's Cramér–Rao bounds with a misfit factor; by chi2/dof alone when
+the response has no standard errors at all): when the residuals
+exceed their stated errors the intervals grow with the misfit (as MATLAB's
+``nlinfit``), but they are not shrunk below what the stated (floored)
+per-dwell errors give when the model happens to fit better than those
+errors; with a dozen dwells ``chi2/dof`` scatters by ±40 %, and the floors
+above stand for tracking systematics that the scatter cannot show
+(docs/accuracy.md, "Identification: stated uncertainty"). 95 % intervals ``value +- t(0.975, dof) *
 stderr`` in physical units (as ``nlparci``). With ``bootstrap=N`` the
 dwells are also resampled with replacement N times, the model refitted from
 the estimate, and percentile intervals reported (``ci95_bootstrap``).
@@ -109,6 +116,8 @@ __all__ = [
 
 _DB_PER_NEPER = 20.0 / math.log(10.0)
 _SIGMA_FLOOR = 1e-3
+#: Scale the covariance by max(1, chi2/dof) (True) or by chi2/dof (nlinfit).
+_BIRGE = True
 #: CIFER's phase weight W_p (per deg**2, with W_g = 1 per dB**2).
 CIFER_PHASE_WEIGHT = 0.01745
 #: CIFER's thresholds on J.
@@ -221,6 +230,9 @@ class _Data:
     sig_ph: NDArray[np.float64]  # rad, NaN where unknown
     fid: NDArray[np.float64]
     labels: tuple[str, ...]
+    #: Whether the response came with standard errors (else the weights are
+    #: arbitrary and only the scatter can give the scale).
+    stated: bool = True
 
     @property
     def n(self) -> int:
@@ -229,7 +241,7 @@ class _Data:
     def take(self, idx: NDArray[np.intp]) -> _Data:
         return _Data(
             self.w[idx], self.lng[idx], self.sig_ln[idx], self.ph[idx], self.has_ph[idx],
-            self.sig_ph[idx], self.fid[idx], tuple(self.labels[i] for i in idx),
+            self.sig_ph[idx], self.fid[idx], tuple(self.labels[i] for i in idx), self.stated,
         )
 
 
@@ -279,7 +291,10 @@ def _prepare(fr: FrequencyResponse, mode: str, who: str) -> tuple[_Data, list[st
             f"harmonic distortion at {', '.join(high)}: nonlinear response "
             "(rate limit, backlash, saturation?); the fit describes the fundamental only"
         )
-    return _Data(w, lng, sig_ln, ph, has_ph, sig_ph, fid, labels), warns
+    se_g = fr.gain_stderr[idx]
+    se_p = fr.phase_stderr_deg[idx]
+    stated = bool(np.any(np.isfinite(se_g) & (se_g > 0)) or np.any(np.isfinite(se_p) & (se_p > 0)))
+    return _Data(w, lng, sig_ln, ph, has_ph, sig_ph, fid, labels, stated), warns
 
 
 def _distinct(w: NDArray[np.float64]) -> int:
@@ -807,7 +822,9 @@ def _build(
         cov_int = np.linalg.pinv(J.T @ J)
         warns.append("singular Jacobian: standard errors are unreliable (too many parameters for the data?)")
     if dof > 0:
-        cov_int = cov_int * (chi2 / dof)
+        # Stated errors are trusted unless the misfit says they are too
+        # small; without any, the scatter alone sets the scale (nlinfit).
+        cov_int = cov_int * (max(1.0, chi2 / dof) if _BIRGE and d.stated else chi2 / dof)
     else:
         cov_int = np.full_like(cov_int, np.nan)
         warns.append("no degrees of freedom left: standard errors unavailable")
