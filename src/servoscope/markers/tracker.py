@@ -474,12 +474,49 @@ def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourMode
     return [f[2] for f in found]
 
 
+#: Bounds of the LED level's noise (in units of its lit − off step) used to tell a partly lit
+#: frame from a lit or dark one: at least 0.3 % (8-bit luma of a 100 DN step quantizes to 1 %
+#: per pixel; the disk's mean of dozens of pixels is finer), at most 3 % (the band a level
+#: must clear was 3 % before the noise was measured, and a noisier LED is better trusted less).
+_LED_NOISE_FLOOR = 0.003
+_LED_NOISE_CAP = 0.03
+
+
+def _led_level_noise(level: np.ndarray, k: int) -> float:
+    """Robust standard deviation of the LED level in the settled frames away from the switch at ``k``."""
+    ok = np.isfinite(level)
+    lit = level[: max(k - 1, 0)][ok[: max(k - 1, 0)]]
+    dark = level[k + 1:][ok[k + 1:]]
+    deviations = np.concatenate([lit - np.median(lit) if lit.size else lit,
+                                 dark - np.median(dark) if dark.size else dark])
+    if deviations.size < 4:
+        return _LED_NOISE_CAP
+    # The standard deviation (2.7× as efficient as the MAD on Gaussian noise: a few dozen
+    # frames give σ to ±10 %), of the frames within 5 MADs: a flicker or a passing
+    # reflection must not widen it.
+    mad = float(np.median(np.abs(deviations)) / 0.6745)
+    kept = deviations[np.abs(deviations) <= 5.0 * mad] if mad > 0 else deviations
+    sigma = float(np.sqrt(np.mean(kept**2)))
+    return min(max(sigma, _LED_NOISE_FLOOR), _LED_NOISE_CAP)
+
+
 def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | None) -> tuple[float | None, float | None, str | None]:
-    """Sub-frame time at which a lit LED switches off.
+    """Sub-frame time at which a lit LED switches off, and its standard uncertainty (s).
 
     A frame whose exposure straddles the switch is partly lit: with exposure
-    window [t − e/2, t + e/2], its level f gives t0 = t − e/2 + f·e. When no
-    frame is partly lit, the switch fell between exposures: the midpoint.
+    window [t − e/2, t + e/2], its level f gives t0 = t − e/2 + f·e, with
+    the level's noise σ (measured on the settled frames) as e·σ. When the
+    exposures are end to end (e = frame interval, the default), the first
+    dark frame k and the one before give t0 = t[k−1] − e/2 + (f[k−1] + f[k])·e
+    (σ√2·e), wherever the switch fell. Otherwise a level is
+    taken as partial when it is 3σ clear of both 0 and 1; when no frame is,
+    the switch fell between exposures or within 3σ·e of an exposure's edge:
+    the midpoint of that interval, with the uncertainty of a uniform
+    distribution over it (never zero: a switch in the last 3σ of an
+    exposure looks like a whole lit frame).
+
+    Assumes the LED's luma is linear in its lit fraction of the exposure
+    (not clipped at white, no strong gamma); the digital twin's is.
     """
     ok = np.isfinite(level)
     if ok.sum() < 3:
@@ -493,15 +530,27 @@ def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | 
     k = int(first_off[0])
     period = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
     exposure = period if exposure_s is None else min(float(exposure_s), period)
-    candidates = [j for j in (k - 1, k) if 0 <= j < level.size and 0.03 < level[j] < 0.97]
+    noise = _led_level_noise(level, k)
+    contiguous = (k >= 1 and exposure > 0 and exposure >= 0.999 * period
+                  and abs(float(time_s[k] - time_s[k - 1]) - period) < 0.01 * period)
+    if contiguous and np.isfinite(level[k - 1]) and np.isfinite(level[k]):
+        # Exposures end to end: the light of frames k−1 and k together is the time the LED
+        # was lit after frame k−1's exposure began, wherever in the two the switch fell.
+        # No threshold decides which frame is the partial one, so a noisy level cannot
+        # send the estimate to the wrong frame.
+        lit_s = float(np.clip(level[k - 1] + level[k], 0.0, 2.0)) * exposure
+        t0 = float(time_s[k - 1]) - exposure / 2.0 + lit_s
+        return t0, float(math.hypot(math.sqrt(2.0) * noise * exposure, 1e-4 * period)), None
+    band = 3.0 * noise
+    candidates = [j for j in (k - 1, k) if 0 <= j < level.size and band < level[j] < 1.0 - band]
     if candidates and exposure > 0:
         j = min(candidates, key=lambda j: abs(level[j] - 0.5))
         t0 = time_s[j] - exposure / 2.0 + float(np.clip(level[j], 0.0, 1.0)) * exposure
-        return float(t0), float(0.05 * exposure + 1e-4 * period), None
-    t_prev, t_next = float(time_s[k - 1]), float(time_s[k])
-    gap = max((t_next - t_prev) - exposure, 0.0)
-    return 0.5 * (t_prev + t_next), float(gap / math.sqrt(12.0)), None
-
+        return float(t0), float(math.hypot(noise * exposure, 1e-4 * period)), None
+    # Between the end of frame k−1's exposure and the start of frame k's, widened by the band.
+    low = float(time_s[k - 1]) + exposure / 2.0 - band * exposure
+    high = float(time_s[k]) - exposure / 2.0 + band * exposure
+    return 0.5 * (low + high), float(max(high - low, 0.0) / math.sqrt(12.0)), None
 
 
 def _record_markers(frame, found: dict, xy: dict, area: dict, sigma: dict) -> None:

@@ -1,0 +1,71 @@
+"""The LED's sub-frame switch time and its stated uncertainty, against exposures with a known switch.
+
+A box exposure e centred on each frame time integrates the LED's light: the
+level of frame n is the lit fraction of its exposure, plus the level noise of
+a real sensor. The switch times are drawn at random, near exposure edges too,
+where a frame that is 99 % lit looks whole.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from servoscope.markers.tracker import _led_switch_time
+
+
+def _levels(t0_s: float, time_s: np.ndarray, exposure_s: float, noise: float, rng) -> np.ndarray:
+    lit_fraction = np.clip((t0_s - (time_s - exposure_s / 2.0)) / exposure_s, 0.0, 1.0)
+    return lit_fraction + noise * rng.standard_normal(time_s.size)
+
+
+@pytest.mark.parametrize("exposure_fraction", [1.0, 0.5])
+@pytest.mark.parametrize("noise", [0.002, 0.01, 0.03])
+def test_switch_time_within_its_stated_uncertainty(exposure_fraction, noise):
+    rng = np.random.default_rng(7)
+    period = 0.01
+    exposure = exposure_fraction * period
+    time_s = np.arange(60) * period
+    z = []
+    sigmas = []
+    for _ in range(400):
+        # Half anywhere after the lead-in, half within 2 % of an exposure's edge (the hard case).
+        base = period * rng.integers(20, 40)
+        if rng.random() < 0.5:
+            t0 = base + rng.uniform(0.0, period)
+        else:
+            t0 = base + exposure / 2.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.0, 0.02) * exposure
+        level = _levels(t0, time_s, exposure, noise, rng)
+        t0_hat, sigma, why = _led_switch_time(time_s, level, exposure)
+        assert why is None and sigma > 0
+        z.append((t0_hat - t0) / sigma)
+        sigmas.append(sigma)
+    z = np.abs(np.asarray(z))
+    # Stated σ honest: errors beyond 3σ are rare (uniform intervals have none).
+    assert np.mean(z > 3.0) < 0.01
+    print(f"median |z| {np.median(z):.2f}, beyond 3σ {np.mean(z > 3.0):.3f}")
+    if exposure_fraction == 1.0:
+        # End-to-end exposures: Gaussian errors (median |z| 0.67); a σ stated twice too
+        # large or too small would put it outside.
+        assert 0.4 < np.median(z) < 1.0
+    else:
+        # A switch near an exposure's edge falls at the end of its gap's interval: |z| ≤ √3.
+        assert 0.4 < np.median(z) <= np.sqrt(3.0)
+    # And useful: where some frame is partly lit, a small fraction of a frame; a switch in
+    # the gap between exposures (exposure half the frame interval) is known only to the gap.
+    gap = period - exposure
+    # (the gap widened by the ±3σ band in which a level cannot be told from 0 or 1)
+    limit = 0.06 * period if gap == 0 else 1.05 * (gap + 6.0 * noise * exposure) / np.sqrt(12)
+    assert np.median(sigmas) < limit
+
+
+def test_switch_between_exposures_is_the_gap_midpoint():
+    time_s = np.arange(40) * 0.01
+    exposure = 0.004  # 4 ms of a 10 ms frame: a switch in the 6 ms gap lights no frame partly
+    level = _levels(0.2072, time_s, exposure, 0.0, np.random.default_rng(0))
+    t0, sigma, why = _led_switch_time(time_s, level, exposure)
+    gap_start, gap_end = 0.2 + exposure / 2, 0.21 - exposure / 2
+    assert why is None
+    assert t0 == pytest.approx(0.5 * (gap_start + gap_end), abs=1e-9)
+    # Uniform over the gap (widened by the 3σ band of a noise-free level, its floor).
+    assert (gap_end - gap_start) / np.sqrt(12) <= sigma <= 1.1 * (gap_end - gap_start) / np.sqrt(12)
