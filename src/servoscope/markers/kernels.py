@@ -179,9 +179,12 @@ _chroma_window_nb = njit(cache=True, nogil=True, inline="always")(_chroma_window
 # ---------------------------------------------------------------------------
 # numpy reference
 # ---------------------------------------------------------------------------
-def _chroma_np(plane, xs, ys, row_off, row_step):
-    """Bilinear chroma at luma pixels (xs, ys); chroma sample (i, j) sits at luma (2i+.5, 2j+.5)."""
-    hc, wc = plane.shape
+def _chroma_neighbours_np(xs, ys, row_off, row_step, hc, wc):
+    """The 2×2 chroma samples around luma pixels (xs, ys) and the bilinear fractions.
+
+    Chroma sample (i, j) sits at luma (2i+.5, 2j+.5); samples beyond the
+    plane's edge are clamped to it. Returns (ia, ib, ja, jb, fx, fy).
+    """
     cx = (xs - 0.5) * 0.5
     cy = (row_off + row_step * ys - 0.5) * 0.5
     i0 = np.floor(cx)
@@ -190,10 +193,13 @@ def _chroma_np(plane, xs, ys, row_off, row_step):
     fy = cy - j0
     i0 = i0.astype(np.int64)
     j0 = j0.astype(np.int64)
-    ia = np.clip(i0, 0, wc - 1)
-    ib = np.clip(i0 + 1, 0, wc - 1)
-    ja = np.clip(j0, 0, hc - 1)
-    jb = np.clip(j0 + 1, 0, hc - 1)
+    return (np.clip(i0, 0, wc - 1), np.clip(i0 + 1, 0, wc - 1), np.clip(j0, 0, hc - 1), np.clip(j0 + 1, 0, hc - 1),
+            fx, fy)
+
+
+def _chroma_np(plane, xs, ys, row_off, row_step):
+    """Bilinear chroma at luma pixels (xs, ys); chroma sample (i, j) sits at luma (2i+.5, 2j+.5)."""
+    ia, ib, ja, jb, fx, fy = _chroma_neighbours_np(xs, ys, row_off, row_step, *plane.shape)
     p = plane
     top = p[ja, ia].astype(np.float64) * (1.0 - fx) + p[ja, ib].astype(np.float64) * fx
     bot = p[jb, ia].astype(np.float64) * (1.0 - fx) + p[jb, ib].astype(np.float64) * fx
@@ -355,18 +361,8 @@ def _luma_alpha_at_chroma_res_np(prm, pY, px, py, dx, dym, d2, radius, my, row_o
     np.add.at(gs, (bj - j_lo, bi - i_lo), aY)
     np.add.at(gn, (bj - j_lo, bi - i_lo), 1.0)
     gs = np.where(gn > 0.0, gs / np.where(gn > 0.0, gn, 1.0), 0.0)
-    cx = (sx - 0.5) * 0.5
-    cy = (row_off + row_step * sy - 0.5) * 0.5
-    i0 = np.floor(cx)
-    j0 = np.floor(cy)
-    fx = cx - i0
-    fy = cy - j0
-    i0 = i0.astype(np.int64)
-    j0 = j0.astype(np.int64)
-    ia = np.clip(i0, 0, wc - 1) - i_lo
-    ib = np.clip(i0 + 1, 0, wc - 1) - i_lo
-    ja = np.clip(j0, 0, hc - 1) - j_lo
-    jb = np.clip(j0 + 1, 0, hc - 1) - j_lo
+    ia, ib, ja, jb, fx, fy = _chroma_neighbours_np(sx, sy, row_off, row_step, hc, wc)
+    ia, ib, ja, jb = ia - i_lo, ib - i_lo, ja - j_lo, jb - j_lo
     num = np.zeros(sx.size)
     wsum = np.zeros(sx.size)
     for j, i, w in ((ja, ia, (1.0 - fx) * (1.0 - fy)), (ja, ib, fx * (1.0 - fy)), (jb, ia, (1.0 - fx) * fy),
@@ -445,21 +441,23 @@ def _bin_pair(kf):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _chroma_uv_at(U, V, x, y, row_off, row_step):
-    """Bilinear Cb and Cr at luma pixel (x, y), as :func:`_chroma_np` (sample positions computed once)."""
-    hc, wc = U.shape
+def _chroma_neighbours(x, y, row_off, row_step, hc, wc):
+    """:func:`_chroma_neighbours_np` for one luma pixel: (ia, ib, ja, jb, fx, fy)."""
     cx = (x - 0.5) * 0.5
     cy = (row_off + row_step * y - 0.5) * 0.5
     i0f = math.floor(cx)
     j0f = math.floor(cy)
-    fx = cx - i0f
-    fy = cy - j0f
     i0 = int(i0f)
     j0 = int(j0f)
-    ia = min(max(i0, 0), wc - 1)
-    ib = min(max(i0 + 1, 0), wc - 1)
-    ja = min(max(j0, 0), hc - 1)
-    jb = min(max(j0 + 1, 0), hc - 1)
+    return (min(max(i0, 0), wc - 1), min(max(i0 + 1, 0), wc - 1), min(max(j0, 0), hc - 1),
+            min(max(j0 + 1, 0), hc - 1), cx - i0f, cy - j0f)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _chroma_uv_at(U, V, x, y, row_off, row_step):
+    """Bilinear Cb and Cr at luma pixel (x, y), as :func:`_chroma_np` (sample positions computed once)."""
+    hc, wc = U.shape
+    ia, ib, ja, jb, fx, fy = _chroma_neighbours(x, y, row_off, row_step, hc, wc)
     top = float(U[ja, ia]) * (1.0 - fx) + float(U[ja, ib]) * fx
     bot = float(U[jb, ia]) * (1.0 - fx) + float(U[jb, ib]) * fx
     u = top * (1.0 - fy) + bot * fy
@@ -474,18 +472,8 @@ def _block_bilinear(gs, gn, gi0, gj0, x, y, row_off, row_step, hc, wc, own):
 
     ``own`` where none of the four blocks has a pixel.
     """
-    cx = (x - 0.5) * 0.5
-    cy = (row_off + row_step * y - 0.5) * 0.5
-    i0f = math.floor(cx)
-    j0f = math.floor(cy)
-    fx = cx - i0f
-    fy = cy - j0f
-    i0 = int(i0f)
-    j0 = int(j0f)
-    ia = min(max(i0, 0), wc - 1) - gi0
-    ib = min(max(i0 + 1, 0), wc - 1) - gi0
-    ja = min(max(j0, 0), hc - 1) - gj0
-    jb = min(max(j0 + 1, 0), hc - 1) - gj0
+    ia, ib, ja, jb, fx, fy = _chroma_neighbours(x, y, row_off, row_step, hc, wc)
+    ia, ib, ja, jb = ia - gi0, ib - gi0, ja - gj0, jb - gj0
     nj, ni = gs.shape
     num = 0.0
     wsum = 0.0
