@@ -151,3 +151,25 @@ def test_summary_predicted_metrics_are_the_models_step_info():
     assert pred["peak_time_s"] == pytest.approx(INFO["PeakTime"] + r.dead_time_s, rel=0.01)
     assert pred["final_change"] == pytest.approx(K * STEP, rel=1e-6)
     assert analyse_step(t, y, t0_s=T0, step_size=STEP).summary()["predicted"] is None
+
+
+def test_t0_uncertainty_adds_to_the_dead_time_uncertainty():
+    """The dead time is counted from t0: a t0 known to ±0.4 ms makes the dead time no better.
+
+    Coverage with t0 itself drawn wrong by its stated σ: the stated dead-time σ must
+    cover the error, which the fit's own σ (~0.03 ms) alone would not.
+    """
+    t, y = record(0)
+    alone = analyse_step(t, y, t0_s=T0, step_size=STEP, model=PAPER_G)
+    sigma_t0 = 4e-4
+    with_t0 = analyse_step(t, y, t0_s=T0, step_size=STEP, model=PAPER_G, t0_stderr_s=sigma_t0)
+    assert with_t0.dead_time_stderr_s == pytest.approx(np.hypot(alone.dead_time_stderr_s, sigma_t0), rel=1e-9)
+    assert with_t0.dead_time_s == alone.dead_time_s
+    rng = np.random.default_rng(3)
+    z = []
+    for _ in range(30):
+        t0_measured = T0 + sigma_t0 * rng.standard_normal()
+        r = analyse_step(t, y, t0_s=t0_measured, step_size=STEP, model=PAPER_G, t0_stderr_s=sigma_t0)
+        z.append((r.dead_time_s - TAU) / r.dead_time_stderr_s)
+    z = np.abs(z)
+    assert np.max(z) < 3.5 and 0.3 < np.median(z) < 1.2

@@ -286,6 +286,7 @@ def analyse_step(
     step_size: float,
     valid: ArrayLike | None = None,
     model: control.TransferFunction | None = None,
+    t0_stderr_s: float | None = None,
 ) -> StepAnalysis:
     """Measure rise time, overshoot, settling time and dead time of a step.
 
@@ -306,6 +307,9 @@ def analyse_step(
     model : control.TransferFunction, optional
         Delay-free model (e.g. ``TransferFunctionFit.transfer_function``)
         used to estimate the dead time with sub-frame precision.
+    t0_stderr_s : float, optional
+        Standard uncertainty of ``t0_s`` (s), e.g. the LED switch time's:
+        the dead time is counted from t0, so its uncertainty adds in.
 
     Returns
     -------
@@ -467,7 +471,9 @@ def analyse_step(
         except np.linalg.LinAlgError:
             cov = np.linalg.pinv(Jb.T @ Jb) * s2
             warns.append("singular Jacobian in the dead-time fit: standard errors are unreliable")
-        dead_se = float(math.sqrt(max(cov[2, 2], 0.0)))
+        # The fit locates the motion's start; the dead time is counted from t0, whose own
+        # uncertainty (independent: the LED, not the blade) adds in quadrature.
+        dead_se = float(math.hypot(math.sqrt(max(cov[2, 2], 0.0)), t0_stderr_s or 0.0))
         g_se = float(math.sqrt(max(cov[1, 1], 0.0)))
         if dead <= 0.0:
             warns.append("fitted dead time is at its lower bound 0")
