@@ -10,6 +10,7 @@ import numpy as np
 
 from .figures import bode_figure, dwell_figure, overlay_figure, step_figure
 from .html import ReportSection, render_html
+from .numbers import format_interval, format_value, format_with_uncertainty
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..campaign.runner import IdentificationResult
@@ -74,6 +75,22 @@ def model_equation(model, dead_time_s: float | None) -> str:
     return f"G(s) = ({_poly_text(model.num)}) / ({_poly_text(model.den)}) · e^(−sτ), τ = {tau}"
 
 
+def dead_time_stderr_s(result: "IdentificationResult") -> float | None:
+    """Standard error of ``result.dead_time_s``: the step test's fit, else the dwells' phases."""
+    if result.dead_time_source == "step test" and result.step is not None:
+        return result.step.dead_time_stderr_s
+    return result.model.dead_time_stderr_s
+
+
+def _dead_time_text(result: "IdentificationResult") -> str:
+    dead = result.dead_time_s
+    if dead is None:
+        return "—"
+    err = dead_time_stderr_s(result)
+    value, err_text = format_with_uncertainty(1e3 * dead, None if err is None else 1e3 * err)
+    return value if err is None else f"{value} ± {err_text}"
+
+
 def build_report(result: "IdentificationResult", figures_dir: Path | None = None) -> str:
     """One self-contained HTML page (figures embedded as PNG).
 
@@ -105,17 +122,19 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     rows = []
     for name in model.param_names:
         lo_hi = model.ci95.get(name)
-        row = [_PARAM_LABELS.get(name, name), model.params.get(name), model.stderr.get(name),
-               "—" if lo_hi is None else f"[{lo_hi[0]:.5g}, {lo_hi[1]:.5g}]"]
+        err = model.stderr.get(name)
+        value_text, err_text = format_with_uncertainty(model.params.get(name), err)
+        row = [_PARAM_LABELS.get(name, name), value_text, err_text,
+               "—" if lo_hi is None else format_interval(lo_hi[0], lo_hi[1], err)]
         if boot:
             b = boot.get(name)
-            row.append("—" if b is None else f"[{b[0]:.5g}, {b[1]:.5g}]")
+            row.append("—" if b is None else format_interval(b[0], b[1], err))
         rows.append(row)
     s.table(header, rows)
     other = [
         ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
         ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],
-        [f"dead time τ (s), from the {result.dead_time_source or '—'}", dead],
+        [f"dead time τ (ms), from the {result.dead_time_source or '—'}", _dead_time_text(result)],
         ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db],
         ["residual RMS of the fit, phase (deg)", model.residual_rms_deg],
     ]
@@ -148,11 +167,17 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
-    s.table(
-        ["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"],
-        [[r["video"], r["frequency_hz"], r["gain"], r.get("gain_stderr"), r["gain_db"], r["phase_deg"], r.get("phase_stderr_deg"),
-          r["fidelity"], r.get("thd"), ", ".join(r.get("flags") or []) or "—"] for r in fr.summary()],
-    )
+    dwell_rows = []
+    for r in fr.summary():
+        gain, gain_se = format_with_uncertainty(r["gain"], r.get("gain_stderr"))
+        phase, phase_se = format_with_uncertainty(r["phase_deg"], r.get("phase_stderr_deg"))
+        gain_db_se = None if r.get("gain_stderr") is None else 20.0 / math.log(10.0) * r["gain_stderr"] / r["gain"]
+        gain_db = format_with_uncertainty(r["gain_db"], gain_db_se)[0]
+        dwell_rows.append([r["video"], format_value(r["frequency_hz"], 4), gain, gain_se, gain_db, phase, phase_se,
+                           format_value(r["fidelity"], 5), format_value(r.get("thd"), 2),
+                           ", ".join(r.get("flags") or []) or "—"])
+    s.table(["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"],
+            dwell_rows)
     sections.append(s)
 
     label = _representative_dwell(result)

@@ -1,0 +1,53 @@
+"""Values shown to the precision their uncertainty supports (GUM §7.2.6)."""
+
+from __future__ import annotations
+
+from decimal import Decimal
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from servoscope.report.numbers import format_interval, format_value, format_with_uncertainty
+
+
+@pytest.mark.parametrize(
+    "value, err, expected",
+    [
+        (0.229664, 0.000317651, ("0.22966", "0.00032")),
+        (84.95158, 0.0171, ("84.952", "0.017")),
+        (36.9184, 0.0533592, ("36.918", "0.053")),
+        (-609.474, 0.241425, ("-609.47", "0.24")),
+        (1234.6, 56.0, ("1235", "56")),
+    ],
+)
+def test_examples(value, err, expected):
+    assert format_with_uncertainty(value, err) == expected
+
+
+@pytest.mark.parametrize("err", [None, 0.0, float("nan"), float("inf")])
+def test_no_usable_uncertainty_falls_back(err):
+    value_text, err_text = format_with_uncertainty(0.229664, err)
+    assert value_text == "0.229664"
+    assert err_text == format_value(err, 2)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-1e5, 1e5, allow_nan=False), st.floats(1e-8, 1e4, allow_nan=False))
+def test_two_significant_digits_and_matching_decimals(value, err):
+    value_text, err_text = format_with_uncertainty(value, err)
+    err_decimals = len(err_text.split(".")[1]) if "." in err_text else 0
+    value_decimals = len(value_text.split(".")[1]) if "." in value_text else 0
+    assert value_decimals == err_decimals
+    # Two significant digits of the uncertainty below 10 (above, its integer digits are kept).
+    if err < 9.95:
+        assert len(Decimal(err_text).normalize().as_tuple().digits) <= 2
+    assert float(err_text) == pytest.approx(err, rel=0.06)
+    # The value is the true one rounded at that place.
+    assert abs(float(value_text) - value) <= 0.5 * 10.0 ** (-value_decimals) * (1 + 1e-9) + 1e-12 * abs(value)
+
+
+def test_interval_at_the_uncertainty_decimals():
+    assert format_interval(0.2290087, 0.2303199, 0.000317651) == "[0.22901, 0.23032]"
+    assert format_interval(0.2290087, 0.2303199) == "[0.22901, 0.23032]"
+    assert format_interval(float("nan"), 1.0, 0.1) == "—"
