@@ -114,13 +114,15 @@ def simulate(outdir: Path, preset: str, seed: int) -> None:
 @click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
 @click.option("--exposure", "exposure_s", type=float, help="Exposure time in seconds (for the LED's sub-frame timing).")
+@click.option("--readout", "readout_s", type=float, default=0.0, show_default=True,
+              help="Rolling-shutter readout time in seconds (top to bottom row); 0 = global shutter.")
 @click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), help="Track CSV to write [default: VIDEO.track.csv].")
 @click.option("--deinterlace", type=click.Choice(["none", "fields", "fields-bff"]), default="none", show_default=True,
               help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
 @click.option("--overlay", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the footage with the centroids, joining line and angle drawn (.mp4 or .mov).")
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
-          out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
+          readout_s: float, out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
     """Track the two markers through VIDEO and write the per-frame angles."""
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
@@ -133,10 +135,12 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     camera = CameraModel.load(calibration) if calibration else None
     if exposure_s is not None and not exposure_s > 0:
         raise ServoscopeError(f"--exposure must be > 0, got {exposure_s}")
+    if not (math.isfinite(readout_s) and readout_s >= 0):
+        raise ServoscopeError(f"--readout must be a time >= 0 in seconds, got {readout_s}")
     if overlay is not None and overlay.suffix.lower() not in (".mp4", ".mov"):
         raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
-                               deinterlace=None if deinterlace == "none" else deinterlace)
+                               deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s)
     result = track_video(video, settings)
     if out_csv is None:
         out_csv = video.with_name(video.stem + ".track.csv")
@@ -271,7 +275,8 @@ def _print_model(result, truth: dict | None = None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from .report.build import _PARAM_LABELS, model_equation
+    from .report.build import _PARAM_LABELS, dead_time_stderr_s, model_equation
+    from .report.numbers import format_interval, format_with_uncertainty
 
     m = result.model
     table = Table(title=model_equation(m, result.dead_time_s))
@@ -291,18 +296,18 @@ def _print_model(result, truth: dict | None = None) -> None:
         rows.append((name, m.params.get(name), m.stderr.get(name), ci, truth_model.get(name), "rel"))
     rows.append(("−3 dB bandwidth (rad/s)", m.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"), "rel"))
     dead = result.dead_time_s
-    step = result.step
     dead_ms = None if dead is None else 1e3 * dead
-    dead_err = None
-    if result.dead_time_source == "step test" and step is not None and step.dead_time_stderr_s is not None:
-        dead_err = 1e3 * step.dead_time_stderr_s
-    elif m.dead_time_stderr_s is not None:
-        dead_err = 1e3 * m.dead_time_stderr_s
+    dead_err_s = dead_time_stderr_s(result)
+    dead_err = None if dead_err_s is None else 1e3 * dead_err_s
     true_dead = truth_model.get("dead_time_s")
     rows.append((f"dead time (ms), {result.dead_time_source or 'not measured'}", dead_ms, dead_err, None,
                  None if true_dead is None else 1e3 * true_dead, "abs"))
     for name, value, err, ci, true, kind in rows:
-        cells = [_PARAM_LABELS.get(name, name), _fmt(value), _fmt(err), "—" if ci is None else f"[{ci[0]:.4g}, {ci[1]:.4g}]"]
+        value_text, err_text = format_with_uncertainty(value, err)
+        if err is None:
+            value_text = _fmt(value)
+        cells = [_PARAM_LABELS.get(name, name), value_text, err_text if err is not None else "—",
+                 "—" if ci is None else format_interval(ci[0], ci[1], err)]
         if truth is not None:
             if value is None or true is None:
                 diff = "—"

@@ -24,7 +24,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan"}
-_CAMERA_KEYS = {"calibration", "exposure_s"}
+_CAMERA_KEYS = {"calibration", "exposure_s", "readout_s"}
 _MARKER_KEYS = {"lead", "trail", "led"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
@@ -80,6 +80,8 @@ class Campaign:
     tests : tuple of TestSpec
     skipped : tuple of (label, reason)
         Tests left out because their video could not be read (``keep_going``).
+    readout_s : float
+        Rolling-shutter readout time (s); 0 for a global shutter.
     """
 
     path: Path
@@ -92,6 +94,7 @@ class Campaign:
     settle_s: float
     tests: tuple[TestSpec, ...] = field(default_factory=tuple)
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    readout_s: float = 0.0
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -133,7 +136,7 @@ class Campaign:
         return Campaign(
             self.path, self.lead, self.trail, self.led, self.camera, self.exposure_s,
             self.input_units, self.settle_s, tuple(t for t in self.tests if t.label not in reasons),
-            self.skipped + tuple(reasons.items()),
+            self.skipped + tuple(reasons.items()), readout_s=self.readout_s,
         )
 
 
@@ -235,6 +238,10 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     exposure = None
     if "exposure_s" in camera_t:
         exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)
+    readout = 0.0
+    if "readout_s" in camera_t:
+        # A rolling shutter's row-to-row delay over the frame (0: global shutter).
+        readout = problems.number("camera.readout_s", camera_t["readout_s"], nonnegative=True)
 
     markers_t = problems.table(data, "markers")
     problems.unknown("markers", markers_t.keys(), _MARKER_KEYS)
@@ -344,6 +351,13 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
                             f"({info.frame_rate_hz:g} frames/s): the camera cannot resolve it",
                         )
                         ok = False
+                    if (readout and info.frame_rate_hz and readout >= 1.0 / info.frame_rate_hz
+                            and not any(p.startswith("camera.readout_s") for p in problems.items)):
+                        problems.add(
+                            "camera.readout_s",
+                            f"{readout:g} s is not shorter than the frame interval of {video!r} "
+                            f"({1e3 / info.frame_rate_hz:.4g} ms): a sensor reads one frame's rows before the next's",
+                        )
             if ok:
                 tests.append(TestSpec(video_path, kind, float(amplitude), frequency, t0, label))
 
@@ -359,4 +373,5 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         settle_s=float(settle),
         tests=tuple(tests),
         skipped=tuple(skipped),
+        readout_s=float(readout or 0.0),
     )

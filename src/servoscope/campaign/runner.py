@@ -41,6 +41,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         led=campaign.led,
         camera=campaign.camera,
         exposure_s=campaign.exposure_s,
+        readout_s=campaign.readout_s,
     )
 
 
@@ -326,7 +327,8 @@ def identify(
             continue
         try:
             sine_fit = fit_sine(
-                track.time_s,
+                # When each angle was sampled (a rolling shutter's rows lag the frame time).
+                track.angle_time_s,
                 track.angle_rad,
                 test.frequency_hz,
                 t0_s=t0,
@@ -374,12 +376,13 @@ def identify(
         else:
             try:
                 step = analyse_step(
-                    track.time_s,
+                    track.angle_time_s,
                     track.angle_rad,
                     t0_s=t0,
                     step_size=test.amplitude,
                     valid=track.valid,
                     model=model.transfer_function,
+                    t0_stderr_s=track.t0_uncertainty_s if test.t0_s is None else None,
                 )
             except ServoscopeError as exc:
                 warnings.append(f"{test.label}: step test left out: {exc}")

@@ -104,6 +104,13 @@ class TrackerSettings:
         fails clearly without one; the paper's batch reduction is
         :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
         windowed sub-pixel kernel itself still runs on the CPU.
+    readout_s : float
+        Rolling-shutter readout time, seconds (0, the default: a global
+        shutter). Row y of a frame is taken as exposed around
+        ``frame_time + readout_s·y/height`` (y in the recorded image): the
+        angle's sample time and the LED's switch time are corrected for the
+        rows the stickers and the LED are on. Must be shorter than the frame
+        (or field) interval.
     """
 
     lead: str = "#d62728"
@@ -118,6 +125,7 @@ class TrackerSettings:
     centroid: str = "local"
     engine: str = "auto"
     backend: str = "auto"
+    readout_s: float = 0.0
 
 
 @dataclass
@@ -158,6 +166,13 @@ class Track:
     angle_sigma_rad : ndarray
         Standard uncertainty of the angle propagated from both centroids'
         (rad); NaN where invalid.
+    angle_time_s : ndarray
+        When the angle was sampled: ``time_s`` for a global shutter; with a
+        rolling shutter, ``time_s + readout_s·y_eff/height``, y_eff the
+        markers' rows weighted by their share of the angle's motion (see
+        :func:`_angle_row_weights`). Fit the angle against this.
+    readout_s : float
+        Rolling-shutter readout time the track was corrected for (0: none).
     """
 
     video: str
@@ -179,6 +194,8 @@ class Track:
     lead_sigma_px: np.ndarray | None = None
     trail_sigma_px: np.ndarray | None = None
     angle_sigma_rad: np.ndarray | None = None
+    angle_time_s: np.ndarray | None = None
+    readout_s: float = 0.0
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -186,6 +203,9 @@ class Track:
         for name in ("lead_sigma_px", "trail_sigma_px", "angle_sigma_rad"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full(n, np.nan))
+        # ...and the angle's sample times: a global shutter's are the frame times.
+        if self.angle_time_s is None:
+            self.angle_time_s = np.array(self.time_s, dtype=np.float64)
 
     @property
     def n_frames(self) -> int:
@@ -245,6 +265,7 @@ class Track:
             "trail_sigma_px": self.trail_sigma_px,
             "angle_sigma_rad": self.angle_sigma_rad,
             "led_level": self.led_level,
+            "angle_time_s": self.angle_time_s,
         }
 
     def to_pandas(self):
@@ -617,6 +638,7 @@ def track_video(
         raise ServoscopeError(f"centroid: {settings.centroid!r} is not 'local' or 'projected'")
     if not (settings.shape_tolerance > 0 and settings.support_margin_px >= 1):
         raise ServoscopeError("shape_tolerance must be > 0 and support_margin_px >= 1")
+    _check_readout(settings.readout_s, info.frame_rate_hz, fields is not None)
     engine = resolve_engine(settings)
     lead = _MarkerTracker("lead", lead_spec, settings)
     trail = _MarkerTracker("trail", trail_spec, settings)
@@ -711,6 +733,9 @@ def track_video(
     _flag_repeated(np.asarray(repeated, dtype=bool), lead_arr, trail_arr, reasons, warnings)
 
     valid = np.array([r == "" for r in reasons], dtype=bool)
+    # A rolling shutter exposes the rows of the *recorded* image in turn: keep
+    # the recorded rows before undistortion replaces the centroids.
+    lead_row, trail_row = lead_arr[:, 1].copy(), trail_arr[:, 1].copy()
     if settings.camera is not None:
         for arr, name in ((lead_arr, "lead"), (trail_arr, "trail")):
             good = np.isfinite(arr[:, 0])
@@ -733,6 +758,16 @@ def track_video(
     # Only the components across the joining line turn it: σθ = √(σ_lead² + σ_trail²) / L.
     separation = np.hypot(*(lead_arr - trail_arr).T)
     angle_sigma = np.where(valid, np.hypot(lead_sigma, trail_sigma) / separation, np.nan)
+    angle_time = time_s.astype(np.float64, copy=True)
+    if settings.readout_s > 0 and n:
+        w_lead, why = _angle_row_weights(lead_arr, trail_arr, valid)
+        if why:
+            warnings.append(f"rolling shutter: {why}; the angle's sample time uses the mean of the two markers' rows")
+        row = w_lead * lead_row + (1.0 - w_lead) * trail_row
+        if np.isfinite(row).any():
+            # Frames without both markers have no angle; give them the typical row.
+            row = np.where(np.isfinite(row), row, np.nanmedian(row))
+            angle_time = angle_time + settings.readout_s * row / info.height
     invalid = n - int(valid.sum())
     if n and not valid.any():
         warnings.append("no frame has both markers")
@@ -758,6 +793,16 @@ def track_video(
             t0, t0_unc, why = _led_switch_time(time_s, led_level, settings.exposure_s)
             if why:
                 warnings.append(why)
+            if t0 is not None and settings.readout_s > 0:
+                # The LED's rows are exposed readout·y/H after the frame time. Its
+                # position before the input starts is where it switched (the
+                # blade is at rest until then); the first clean frame shows it.
+                led_row = _led_row_px(snapshot, led_spec) if snapshot is not None else None
+                if led_row is None:
+                    warnings.append("rolling shutter: LED not found in the reference frame; "
+                                    "t0 not corrected for the LED's row")
+                else:
+                    t0 = t0 + settings.readout_s * led_row / info.height
         else:
             warnings.append("LED brightness does not change: no input start (t0) found")
 
@@ -781,7 +826,82 @@ def track_video(
         lead_sigma_px=lead_sigma,
         trail_sigma_px=trail_sigma,
         angle_sigma_rad=angle_sigma,
+        angle_time_s=angle_time,
+        readout_s=float(settings.readout_s),
     )
+
+
+def _check_readout(readout_s: float, frame_rate_hz: float | None, fields: bool) -> None:
+    """Refuse a readout time no sensor can have: negative, or not shorter than the frame interval.
+
+    A sensor reads all of a frame's rows before it reads the next frame's
+    (an interlaced one, a field's before the next field's).
+    """
+    if isinstance(readout_s, bool) or not (isinstance(readout_s, (int, float)) and math.isfinite(readout_s)
+                                           and readout_s >= 0):
+        raise ServoscopeError(f"readout: must be a time >= 0 in seconds, got {readout_s!r}")
+    if readout_s > 0 and frame_rate_hz:
+        interval_s = 1.0 / (frame_rate_hz * (2 if fields else 1))
+        if readout_s >= interval_s:
+            raise ServoscopeError(
+                f"readout: {readout_s:g} s is not shorter than the {'field' if fields else 'frame'} interval "
+                f"({1e3 * interval_s:.4g} ms): a sensor reads one frame's rows before the next frame's")
+
+
+def _angle_row_weights(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndarray) -> tuple[float, str]:
+    """Share of the lead marker in the angle's motion; weights its row in the angle's sample time.
+
+    With each marker seen at its own row's time, the angle is, to first order
+    in the time difference, ``w·θ(t_lead) + (1 − w)·θ(t_trail)`` where w is
+    the lead's share of the angle's change: each marker moves across the
+    joining line by its lever arm about the pivot times the rotation, so
+    ``w = (s_lead − s_pivot)/L`` along the line of length L. That is
+    ``θ(w·t_lead + (1 − w)·t_trail)``: the angle is sampled at the
+    lever-weighted mean row, not the plain mean (the plain mean is right only
+    for a pivot midway between the stickers; with the paper's quarter-chord
+    pivot w ≈ 0.21). w is measured from the track itself: the regression of
+    the lead's motion across the line on the angle's, ``n_lead = w·(n_lead − n_trail)``.
+
+    Returns
+    -------
+    w_lead : float
+        0.5 when it cannot be measured.
+    why : str
+        Why not ("" when measured).
+    """
+    ok = valid & np.isfinite(lead_xy_px).all(axis=1) & np.isfinite(trail_xy_px).all(axis=1)
+    if ok.sum() < 10:
+        return 0.5, "too few frames with both markers to measure their lever arms"
+    lead, trail = lead_xy_px[ok], trail_xy_px[ok]
+    axis = lead.mean(axis=0) - trail.mean(axis=0)
+    e = axis / np.hypot(*axis)
+    normal = np.array([-e[1], e[0]])
+    n_lead = (lead - lead.mean(axis=0)) @ normal
+    n_trail = (trail - trail.mean(axis=0)) @ normal
+    d = n_lead - n_trail
+    sdd = float(d @ d)
+    if not sdd > 0:
+        return 0.5, "the markers do not move, so their lever arms cannot be measured"
+    w = float(n_lead @ d) / sdd
+    resid = n_lead - w * d
+    se = math.sqrt(float(resid @ resid) / max(d.size - 1, 1) / sdd)
+    # 0.05 of the two rows' difference is < 0.1 ms at 20 ms readout for markers 30 rows apart.
+    if not se < 0.05:
+        return 0.5, f"the markers move too little to measure their lever arms (share {w:.2f} ± {se:.2f})"
+    return w, ""
+
+
+def _led_row_px(rgb: np.ndarray, led_spec) -> float | None:
+    """Row (recorded image, px) of the largest lit-LED-coloured blob in ``rgb``; None when there is none."""
+    model = ColourModel.from_seed(led_spec)
+    mask = model.mask(rgb).astype(np.uint8)
+    n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return None
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < 3:
+        return None
+    return float(cents[best][1])
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")

@@ -80,6 +80,45 @@ def exposure_averaged_response(servo, signal: InputSignal, time_s: np.ndarray, e
     return values @ (0.5 * weights)
 
 
+def _rolling_pitch(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray,
+                   grid_step_s: float = 2e-4) -> Callable[[np.ndarray], np.ndarray]:
+    """The exposure-averaged pitch as a function of time, for a rolling shutter's row times.
+
+    A rolling-shutter frame needs the pose at hundreds of row times; the
+    exact response costs ~5 µs a sample, so it is evaluated on a grid of
+    ``grid_step_s`` spanning every row time and interpolated linearly. The
+    interpolation error, at most ``grid_step_s²·max|p̈|/8``, is 8e-7 rad for
+    the paper servo's step (|p̈| ≤ 160 rad/s²) and far less for the dwells —
+    a hundredth of the angle noise (~5e-5 rad).
+    """
+    t_lo = float(time_s[0]) - grid_step_s
+    t_hi = float(time_s[-1]) + preset.readout_s + grid_step_s
+    grid = t_lo + grid_step_s * np.arange(int(math.ceil((t_hi - t_lo) / grid_step_s)) + 1)
+    values = exposure_averaged_response(preset.servo, signal, grid, preset.exposure_s)
+    return lambda t: np.interp(t, grid, values)
+
+
+def _row_time_s(frame_time_s: np.ndarray, y_px: np.ndarray, preset: CampaignPreset) -> np.ndarray:
+    """When a rolling shutter exposes image row ``y_px`` (recorded image) of the frame at ``frame_time_s``."""
+    return frame_time_s + preset.readout_s * y_px / preset.height
+
+
+def _rolling_truth(preset: CampaignPreset, scene: Scene, camera, pitch_at, time_s: np.ndarray,
+                   uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time at which a rolling shutter sees a blade point, and where it is (ideal px) then.
+
+    The row depends on the pose and the pose on the row's time: two fixed-point
+    passes from the frame-time pose (a point moves by < 0.1 px in the ~0.1 ms
+    that its own motion shifts its row time).
+    """
+    when = time_s.copy()
+    for _ in range(3):
+        xy = scene.to_image(uv, pitch_at(when))
+        recorded = camera.distort_points(xy) if camera.has_distortion else xy
+        when = _row_time_s(time_s, recorded[:, 1], preset)
+    return when, scene.to_image(uv, pitch_at(when))
+
+
 def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputSignal, duration_s: float,
                 noise_seed: int) -> dict:
     """Render and encode one test video; return its truth record (without the video name).
@@ -113,10 +152,30 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     angle = marker_angle_rad(lead, trail)
     led = led_exposure_fraction(time_s, signal.t0_s, preset.exposure_s)
     renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed)
+    rolling: dict = {}
+    if preset.readout_s > 0:
+        # Each row is exposed around its own time; the stickers and the LED
+        # are seen at their rows' times, which truth records.
+        pitch_at = _rolling_pitch(preset, signal, time_s)
+        camera = preset.camera()
+        lead_uv, trail_uv = scene.sticker_centres_uv()
+        lead_time, lead = _rolling_truth(preset, scene, camera, pitch_at, time_s, lead_uv)
+        trail_time, trail = _rolling_truth(preset, scene, camera, pitch_at, time_s, trail_uv)
+        led_time, _ = _rolling_truth(preset, scene, camera, pitch_at, time_s, scene.led_centre_uv())
+        angle = marker_angle_rad(lead, trail)
+        led = led_exposure_fraction(led_time, signal.t0_s, preset.exposure_s)
+        rolling = {"lead_time_s": lead_time.tolist(), "trail_time_s": trail_time.tolist(),
+                   "led_time_s": led_time.tolist()}
+        rows = np.arange(preset.height, dtype=np.float64)
     with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
                      preset=preset.x264_preset) as writer:
         for i in range(n):
-            writer.write(renderer.render(float(pitch[i]), float(led[i]), i))
+            if preset.readout_s > 0:
+                row_t = _row_time_s(time_s[i], rows, preset)
+                row_led = led_exposure_fraction(row_t, signal.t0_s, preset.exposure_s)
+                writer.write(renderer.render_rolling(pitch_at(row_t), row_led, i))
+            else:
+                writer.write(renderer.render(float(pitch[i]), float(led[i]), i))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -130,6 +189,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         "lead_xy_px": lead.tolist(),
         "trail_xy_px": trail.tolist(),
         "led_level": led.tolist(),
+        **rolling,
     })
     return rec
 
@@ -151,7 +211,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     **overrides
         Any :class:`~servoscope.simulate.presets.CampaignPreset` field, e.g.
         ``width=360, height=288, fps=50, codec="raw", bit_rate=8_000_000,
-        noise_sigma_dn=0, frequencies_hz=(1.0, 2.0), servo=ServoModel(...)``.
+        noise_sigma_dn=0, frequencies_hz=(1.0, 2.0), servo=ServoModel(...)``;
+        ``readout_s=0.015`` (with ``fps=50, exposure_s=0.02``) films with a
+        rolling shutter (see docs/twin.md).
 
     Returns
     -------
@@ -236,6 +298,8 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             "codec": p.codec, "bit_rate": p.bit_rate if p.codec == "h264" else None, "fps": float(fps),
             "fps_rational": [fps.numerator, fps.denominator], "exposure_s": p.exposure_s,
             "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,
+            # Only a rolling shutter is said: a global shutter's truth stays as it was.
+            **({"readout_s": p.readout_s} if p.readout_s > 0 else {}),
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
         "input_units": p.input_units,
@@ -251,6 +315,8 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
         # The shutter time is a camera setting the operator knows; the LED's
         # partly lit frame gives the input's start only if it is known.
         *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 else []),
+        # Likewise the sensor's readout time (from its data sheet or measured).
+        *([f"readout_s = {_toml_float(p.readout_s)}"] if p.readout_s > 0 else []),
         "",
         "[markers]",
         f"lead = {_toml_str(scene.lead_colour)}",

@@ -55,6 +55,11 @@ class CampaignPreset:
         camcorder's 1/100 s shutter at 100 frames/s. The LED's partial
         exposure dates the input start to a fraction of a frame only when the
         switch falls inside an exposure; the blade's pose is averaged over it.
+    readout_s : float
+        Rolling-shutter readout time, seconds: row y of a frame is exposed
+        around ``frame_time + readout_s·y/height``. 0 (the default) is a
+        global shutter; it must be shorter than the frame interval (a sensor
+        reads one frame's rows before the next frame's).
     pre_roll_s : float
         Time with the LED lit before the input starts (t0 is this plus a
         seeded fraction of a frame, so it never falls on a frame boundary).
@@ -90,6 +95,7 @@ class CampaignPreset:
     x264_preset: str = "ultrafast"
     noise_sigma_dn: float = 1.5
     exposure_s: float | None = None
+    readout_s: float = 0.0
     pre_roll_s: float = 0.5
     settle_s: float = 0.5
     min_dwell_s: float = 3.0
@@ -115,6 +121,9 @@ class CampaignPreset:
             raise ServoscopeError("min_dwell_s and step_after_t0_s must be > 0, min_periods >= 0")
         if self.exposure_s * float(Fraction(self.fps).limit_denominator(1_000_000)) > 1.0 + 1e-12:
             raise ServoscopeError("exposure_s cannot exceed the frame interval")
+        if not (math.isfinite(self.readout_s) and 0.0 <= self.readout_s
+                and self.readout_s * float(Fraction(self.fps).limit_denominator(1_000_000)) < 1.0):
+            raise ServoscopeError(f"readout_s must be >= 0 and shorter than the frame interval, not {self.readout_s!r}")
         if self.scene is not None and (self.scene.width, self.scene.height) != (self.width, self.height):
             raise ServoscopeError("the scene's size differs from the video size")
 

@@ -145,6 +145,30 @@ def _composite(frame: np.ndarray, acc: np.ndarray, x0: int, y0: int, colour: np.
             frame[y, x, 2] += a * (c2 - frame[y, x, 2])
 
 
+@njit(cache=True)
+def _composite_rows(frame: np.ndarray, xs: np.ndarray, ys: np.ndarray, rows: np.ndarray, x0: int, nx: int,
+                    colours: np.ndarray, sign: float) -> None:
+    """Blend row ``rows[r]`` of polygon ``(xs[r], ys[r])`` in ``colours[r]`` into ``frame``, for every r.
+
+    A rolling shutter sees each row at its own time: each row gets the
+    polygon at that row's pose, and only that row of its exact coverage is
+    drawn (the same signed-area accumulation, on a one-row window).
+    """
+    acc = np.zeros((1, nx + 1))
+    for r in range(rows.shape[0]):
+        j = rows[r]
+        ymin = ys[r, 0]
+        ymax = ys[r, 0]
+        for k in range(1, ys.shape[1]):
+            ymin = min(ymin, ys[r, k])
+            ymax = max(ymax, ys[r, k])
+        if j < np.floor(ymin + 0.5) or j > np.floor(ymax + 0.5):
+            continue  # this row's polygon does not reach row j
+        acc[:] = 0.0
+        _accumulate(xs[r], ys[r], x0, j, acc)
+        _composite(frame, acc, x0, j, colours[r], sign)
+
+
 @njit(cache=True, inline="always")
 def _round_clip(v: np.float32) -> np.uint8:
     # Branch-free clip, then truncation of v + 1/2 (v >= 0) is rounding; the
@@ -190,6 +214,28 @@ def _finish(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: 
 def _signed_area(xy: np.ndarray) -> float:
     x, y = xy[:, 0], xy[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def _distort(camera: CameraModel, points_px: np.ndarray) -> np.ndarray:
+    """``camera.distort_points`` in numpy, for the many vertices of a rolling-shutter frame.
+
+    OpenCV's forward model (what ``projectPoints`` computes with no rotation
+    or translation) for up to five coefficients; projectPoints costs ~70 ns a
+    point, which a frame's ~50 000 per-row vertices would turn into 4 ms.
+    Other coefficient counts go to OpenCV.
+    """
+    d = np.asarray(camera.dist_coeffs, dtype=np.float64).ravel()
+    if d.size > 5:
+        return camera.distort_points(points_px)
+    k1, k2, p1, p2, k3 = np.concatenate([d, np.zeros(5 - d.size)])
+    k = camera.camera_matrix
+    x = (points_px[:, 0] - k[0, 2]) / k[0, 0]
+    y = (points_px[:, 1] - k[1, 2]) / k[1, 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([k[0, 0] * xd + k[0, 2], k[1, 1] * yd + k[1, 2]], axis=1)
 
 
 def _window(xy: np.ndarray, width: int | None, height: int | None) -> tuple[int, int, int, int]:
@@ -303,16 +349,22 @@ class FrameRenderer:
         ang = 2.0 * np.pi * np.arange(k) / k
         unit = np.stack([np.cos(ang), np.sin(ang)], axis=1)
         rs, rl = 0.5 * scene.sticker_diameter_px, 0.5 * scene.led_diameter_px
-        self._parts_uv = [scene.blade_outline_uv(), lead_uv + rs * unit, trail_uv + rs * unit,
-                          scene.led_centre_uv() + rl * unit]
+        self._parts_uv = [scene.blade_outline_uv(), lead_uv + rs * unit, trail_uv + rs * unit]
+        self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour)]
+        if scene.led_offset_px != 0:
+            # An LED off the chord sits in a dark housing (the blade's colour) on
+            # a bracket, as on the blade itself: a tracker that reads the LED's
+            # brightness around it sees the LED on a dark ground either way.
+            self._parts_uv.append(scene.led_centre_uv() + 2.5 * rl * unit)
+            self._colours.append(colour_rgb(scene.blade_colour))
+        self._parts_uv.append(scene.led_centre_uv() + rl * unit)
         self._splits = np.cumsum([len(p) for p in self._parts_uv])[:-1]
         self._all_uv = np.concatenate(self._parts_uv, axis=0)
-        self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour)]
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
     def outlines_px(self, pitch_rad: float) -> list[np.ndarray]:
-        """Recorded (distorted) outlines of blade, lead sticker, trail sticker and LED."""
+        """Recorded (distorted) outlines of blade, lead sticker, trail sticker, (LED housing,) LED."""
         xy = self.scene.to_image(self._all_uv, float(pitch_rad))
         if self.camera is not None:
             xy = self.camera.distort_points(xy)
@@ -340,6 +392,86 @@ class FrameRenderer:
             _composite(self._work, acc, x0, y0, colour.astype(np.float64), sign)
             self._dirty.append((y0, y0 + ny, x0, x0 + nx))
         return self._work
+
+    def composite_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray) -> np.ndarray:
+        """The noise-free frame of a rolling shutter: row y shows the scene at its own time.
+
+        Every moving part is drawn row by row, each row with the part's
+        outline at that row's pitch and the LED in that row's level; only the
+        rows a part can reach in this frame are visited. With the same pitch
+        and level on every row this draws what :meth:`composite` draws (up to
+        rounding: the coverage is accumulated per row).
+
+        Parameters
+        ----------
+        row_pitch_rad : ndarray, shape (height,)
+            Blade pitch seen by each image row (the pose at the row's time,
+            averaged over its exposure).
+        row_led_level : ndarray, shape (height,)
+            Lit fraction of each row's exposure, in [0, 1].
+
+        Returns
+        -------
+        ndarray of float32, shape (height, width, 3)
+            The renderer's working buffer (copy it to keep it).
+        """
+        h, w = self.scene.height, self.scene.width
+        pitch = np.asarray(row_pitch_rad, dtype=np.float64)
+        level = np.asarray(row_led_level, dtype=np.float64)
+        if pitch.shape != (h,) or level.shape != (h,):
+            raise ServoscopeError(f"composite_rolling: need one pitch and one LED level per row ({h})")
+        if not (np.all(level >= 0.0) and np.all(level <= 1.0)):
+            raise ServoscopeError("row_led_level must be in [0, 1]")
+        for (y0, y1, x0, x1) in self._dirty:
+            self._work[y0:y1, x0:x1] = self._bg[y0:y1, x0:x1]
+        self._dirty = []
+        row_colours = [np.broadcast_to(c, (h, 3)) for c in self._colours]
+        row_colours.append(self._led_off[None, :] + level[:, None] * (self._led_on - self._led_off)[None, :])
+        # The rows a part can reach: its extent at the frame's extreme pitches,
+        # widened by 2 px for the curvature of the arcs its vertices follow
+        # in between (R·δp²/8, far below a pixel for a frame's motion).
+        lo, hi = self.outlines_px(float(pitch.min())), self.outlines_px(float(pitch.max()))
+        for uv, a, b, colours in zip(self._parts_uv, lo, hi, row_colours):
+            ys = np.concatenate([a[:, 1], b[:, 1]])
+            y0 = max(int(np.floor(ys.min() + 0.5)) - 2, 0)
+            y1 = min(int(np.floor(ys.max() + 0.5)) + 2, h - 1)
+            if y1 < y0:
+                continue
+            rows = np.arange(y0, y1 + 1)
+            xy = self.scene.to_image(uv, pitch[rows])
+            if self.camera is not None:
+                xy = _distort(self.camera, xy.reshape(-1, 2)).reshape(xy.shape)
+            xs = np.ascontiguousarray(xy[..., 0])
+            yy = np.ascontiguousarray(xy[..., 1])
+            x0 = max(int(np.floor(xs.min() + 0.5)), 0)
+            x1 = min(int(np.floor(xs.max() + 0.5)), w - 1)
+            if x1 < x0:
+                continue
+            sign = -1.0 if _signed_area(xy[0]) >= 0 else 1.0
+            _composite_rows(self._work, xs, yy, rows.astype(np.int64), x0, x1 - x0 + 1,
+                            np.ascontiguousarray(colours[rows], dtype=np.float64), sign)
+            self._dirty.append((y0, y1 + 1, x0, x1 + 1))
+        return self._work
+
+    def render_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray, frame_index: int = 0) -> np.ndarray:
+        """One recorded rolling-shutter frame: :meth:`composite_rolling`, seeded noise, uint8.
+
+        Parameters
+        ----------
+        row_pitch_rad, row_led_level : ndarray, shape (height,)
+            See :meth:`composite_rolling`.
+        frame_index : int
+            Index of the frame (selects its noise, as in :meth:`render`).
+
+        Returns
+        -------
+        ndarray of uint8, shape (height, width, 3)
+        """
+        work = self.composite_rolling(row_pitch_rad, row_led_level)
+        out = np.empty(work.shape, dtype=np.uint8)
+        state = np.random.SeedSequence([self.noise_seed, int(frame_index)]).generate_state(1, np.uint64)[0]
+        _finish(work, out, self._noise_table, np.uint64(state))
+        return out
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0) -> np.ndarray:
         """One recorded frame: composite, add seeded noise, round to uint8.

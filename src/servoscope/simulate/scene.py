@@ -130,7 +130,12 @@ class Scene:
     led_diameter_px : float
         LED diameter.
     led_chord_fraction : float
-        LED position along the chord, measured from the leading edge, on the chord line.
+        LED position along the chord, measured from the leading edge.
+    led_offset_px : float
+        LED offset perpendicular to the chord (blade-frame v, up in the image
+        at zero pitch): 0 puts it on the chord line; a non-zero offset models
+        an LED on a bracket fixed to the blade, on other image rows than the
+        stickers (what a rolling shutter makes matter).
     background_top, background_bottom : str
         Colours of the vertical background gradient.
     blotch_amplitude_dn : float
@@ -161,6 +166,7 @@ class Scene:
     led_off_colour: str = "#45441c"
     led_diameter_px: float = 14.0
     led_chord_fraction: float = 0.62
+    led_offset_px: float = 0.0
     background_top: str = "#8395a8"
     background_bottom: str = "#5a6a7e"
     blotch_amplitude_dn: float = 10.0
@@ -178,6 +184,8 @@ class Scene:
                 raise ServoscopeError(f"scene: {name} must be > 0")
         if not 0 < self.thickness_ratio < 1:
             raise ServoscopeError("scene: thickness_ratio must be in (0, 1)")
+        if not math.isfinite(self.led_offset_px):
+            raise ServoscopeError("scene: led_offset_px must be finite")
         if not self.max_segment_px > 0:
             raise ServoscopeError("scene: max_segment_px must be > 0")
         for name in ("blade_colour", "lead_colour", "trail_colour", "led_colour", "led_off_colour",
@@ -203,6 +211,7 @@ class Scene:
         s = min(width / REFERENCE_SIZE[0], height / REFERENCE_SIZE[1])
         cx_ref, cy_ref = REFERENCE_SIZE[0] / 2.0, REFERENCE_SIZE[1] / 2.0
         scaled = {name: getattr(ref, name) * s for name in _LENGTH_FIELDS}
+        scaled["led_offset_px"] = ref.led_offset_px * s
         scaled["pivot_xy_px"] = (width / 2.0 + (ref.pivot_xy_px[0] - cx_ref) * s,
                                  height / 2.0 + (ref.pivot_xy_px[1] - cy_ref) * s)
         known = {f.name for f in fields(cls)}
@@ -239,7 +248,7 @@ class Scene:
 
     def led_centre_uv(self) -> np.ndarray:
         """LED centre in the blade frame."""
-        return np.array([self._u_from_le(self.led_chord_fraction), 0.0])
+        return np.array([self._u_from_le(self.led_chord_fraction), self.led_offset_px])
 
     def disk_outline(self, centre_xy_px: np.ndarray, diameter_px: float) -> np.ndarray:
         """Regular ``sticker_vertices``-gon (centroid exactly at the centre), ideal pixels, CCW on screen."""

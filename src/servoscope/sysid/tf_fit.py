@@ -410,8 +410,13 @@ def _delay_seed(residual_rad: NDArray[np.float64], w: NDArray[np.float64], weigh
     return np.clip(tau, 0.0, None)
 
 
-def _fill_gain_and_delay(st: Structure, d: _Data, seeds: NDArray[np.float64], use_phase: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Set ln K (and tau) of each seed to their least-squares values; return seeds and costs."""
+def _fill_gain_and_delay(st: Structure, d: _Data, seeds: NDArray[np.float64], use_phase: bool,
+                         delay_seed: str = "unwrap") -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Set ln K (and tau) of each seed to their least-squares values; return seeds and costs.
+
+    ``delay_seed``: "unwrap" (the phases unwrapped across the dwells: right
+    when they are dense) or "grid" (:func:`_delay_seed`: right when sparse).
+    """
     lg = log_response(st, seeds, d.w, with_delay=False)  # (S, n)
     wts = 1.0 / d.sig_ln**2
     seeds = seeds.copy()
@@ -423,7 +428,15 @@ def _fill_gain_and_delay(st: Structure, d: _Data, seeds: NDArray[np.float64], us
         wk, phk, sk = d.w[hp], d.ph[hp], d.sig_ph[hp]
         model = lg.imag[:, hp]
         if st.delay:
-            tau = _delay_seed(phk[None, :] - model, wk, 1.0 / sk**2)
+            residual = phk[None, :] - model
+            v = 1.0 / sk**2
+            if delay_seed == "grid":
+                tau = _delay_seed(residual, wk, v)
+            else:
+                # The phase left over by the rational part is -w*tau (mod 2 pi), unwrapped across the dwells.
+                dd = np.unwrap(residual, axis=1)
+                dd -= 2.0 * np.pi * np.round(dd[:, :1] / (2.0 * np.pi))
+                tau = np.clip(-(dd * v * wk).sum(axis=1) / np.sum(v * wk**2), 0.0, None)
             seeds[:, st.offsets()["tau"]] = np.sqrt(tau)
             model = model - wk[None, :] * tau[:, None]
         rp = _wrap(model - phk[None, :]) / sk
@@ -450,8 +463,17 @@ def _local(st: Structure, d: _Data, theta0: NDArray[np.float64], use_phase: bool
 
 
 def _multistart(st: Structure, d: _Data, use_phase: bool, n_starts: int) -> Any:
+    if not (use_phase and st.delay):
+        return _multistart_from(st, d, use_phase, n_starts, "unwrap")
+    # Both ways of starting the delay, each with its own starts; the lower cost wins.
+    runs = [_multistart_from(st, d, use_phase, n_starts, how) for how in ("unwrap", "grid")]
+    runs = [r for r in runs if r is not None]
+    return min(runs, key=lambda r: r.cost) if runs else None
+
+
+def _multistart_from(st: Structure, d: _Data, use_phase: bool, n_starts: int, delay_seed: str) -> Any:
     seeds = _seeds(st, float(d.w.min()), float(d.w.max()))
-    seeds, cost = _fill_gain_and_delay(st, d, seeds, use_phase)
+    seeds, cost = _fill_gain_and_delay(st, d, seeds, use_phase, delay_seed)
     order = np.argsort(cost, kind="stable")
     best = None
     agree = 0
