@@ -317,7 +317,7 @@ def _print_model(result, truth: dict | None = None) -> None:
                 diff = f"{value - true:+.2f} ms"
             cells += [_fmt(true), diff]
         table.add_row(*cells)
-    Console(highlight=False, width=max(100, 20)).print(table)
+    Console(highlight=False, width=112).print(table)
 
 
 def _fmt(value) -> str:
