@@ -95,3 +95,15 @@ def test_out_cannot_overwrite_inputs(tmp_path):
     proc = run_cli("identify", tmp_path / "campaign.toml", "--out", tmp_path)
     assert proc.returncode == 2 and "would overwrite an input" in proc.stderr
     assert (tmp_path / "result.json").read_bytes() == before
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--fps", "50", "--readout", "0.03"], "shorter than the frame interval"),
+    (["--readout", "-0.001"], "-0.001"),
+])
+def test_simulate_rejects_an_impossible_camera_in_one_line(tmp_path, args, words):
+    out = tmp_path / "twin"
+    r = run_cli("simulate", str(out), "--preset", "quick", *args)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("servoscope: error:") and words in r.stderr
+    assert not (out / "campaign.toml").exists()

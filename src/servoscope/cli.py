@@ -99,11 +99,23 @@ def cli() -> None:
 @click.argument("outdir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--preset", default="paper", show_default=True, help="Campaign preset (paper, quick).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed: same seed, same footage.")
-def simulate(outdir: Path, preset: str, seed: int) -> None:
+@click.option("--codec", type=click.Choice(["h264", "raw"]), help="Video codec (preset's: h264).")
+@click.option("--bit-rate", type=click.IntRange(min=100_000), help="H.264 bit rate, bit/s (preset's: 20000000, a camcorder's).")
+@click.option("--fps", type=click.FloatRange(min=1.0), help="Frame rate, frames/s (preset's: 100).")
+@click.option("--exposure", "exposure_s", type=click.FloatRange(min=0.0, min_open=True),
+              help="Exposure time, s (preset's: one frame interval).")
+@click.option("--readout", "readout_s", type=click.FloatRange(min=0.0),
+              help="Rolling-shutter readout time, s, < the frame interval (preset's: 0, a global shutter).")
+def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: int | None, fps: float | None,
+             exposure_s: float | None, readout_s: float | None) -> None:
     """Render a campaign with a known answer (the digital twin) into OUTDIR."""
     from .simulate import simulate_campaign
 
-    manifest = simulate_campaign(outdir, preset=preset, seed=seed)
+    given = {"codec": codec, "bit_rate": bit_rate, "fps": fps, "exposure_s": exposure_s, "readout_s": readout_s}
+    if fps is not None and exposure_s is None:
+        # The preset's exposure is one interval of its own frame rate; keep it one interval of this one.
+        given["exposure_s"] = 1.0 / fps
+    manifest = simulate_campaign(outdir, preset=preset, seed=seed, **{k: v for k, v in given.items() if v is not None})
     click.echo(f"wrote {manifest}")
 
 
