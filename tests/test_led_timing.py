@@ -69,3 +69,52 @@ def test_switch_between_exposures_is_the_gap_midpoint():
     assert t0 == pytest.approx(0.5 * (gap_start + gap_end), abs=1e-9)
     # Uniform over the gap (widened by the 3σ band of a noise-free level, its floor).
     assert (gap_end - gap_start) / np.sqrt(12) <= sigma <= 1.1 * (gap_end - gap_start) / np.sqrt(12)
+
+
+def _overexposed_copy(src, dst, gain: float) -> None:
+    """The same footage with its luma amplified and clipped at limited-range white (235), chroma kept."""
+    import av
+
+    from servoscope.video.reader import iter_yuv_frames
+
+    with av.open(str(dst), "w") as container:
+        stream = None
+        for f in iter_yuv_frames(src):
+            h, w = f.luma.shape
+            if stream is None:
+                stream = container.add_stream("rawvideo", rate=100)
+                stream.pix_fmt, stream.width, stream.height = "yuv420p", w, h
+            i420 = np.empty((h * 3 // 2, w), np.uint8)
+            i420[:h] = np.clip(16 + (f.luma.astype(np.float64) - 16) * gain, 16, 235).astype(np.uint8)
+            chroma = i420[h:].reshape(2, h // 2, w // 2)
+            chroma[0], chroma[1] = f.u, f.v
+            for packet in stream.encode(av.VideoFrame.from_ndarray(i420, format="yuv420p")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+
+
+def test_a_clipped_led_widens_t0_to_its_exposure(tmp_path):
+    """An LED at the video's white level reads fully lit for part of the exposure it was dark:
+    the partly lit frame's level, and t0 within it, are not known. Said, and in t0's σ."""
+    from servoscope.markers import track_video
+    from servoscope.simulate import Scene
+    from servoscope.simulate.clips import render_clip
+
+    n, switch = 60, 29
+    led = np.ones(n)
+    led[switch] = 0.4  # lit for 40 % of frame 29's exposure (1/fps, centred on its time)
+    led[switch + 1:] = 0.0
+    true_t0 = switch / 100.0 - 0.005 + 0.4 * 0.01
+    render_clip(tmp_path / "c.avi", Scene(), 0.02 * np.sin(np.arange(n) / 10.0), fps=100, led_level=led, codec="raw")
+    normal = track_video(tmp_path / "c.avi")
+    assert not any("white level" in w for w in normal.warnings)
+    assert abs(normal.t0_s - true_t0) < 3 * normal.t0_uncertainty_s < 0.5e-3
+    _overexposed_copy(tmp_path / "c.avi", tmp_path / "bright.avi", gain=2.0)
+    bright = track_video(tmp_path / "bright.avi")
+    assert bright.n_valid == n  # the stickers are still found by their chroma
+    assert any("white level" in w for w in bright.warnings)
+    # The clipped level moves t0 by milliseconds; the stated σ (exposure/√12) covers it.
+    assert abs(bright.t0_s - true_t0) > 1e-3
+    assert bright.t0_uncertainty_s == pytest.approx(0.01 / np.sqrt(12.0))
+    assert abs(bright.t0_s - true_t0) < 3 * bright.t0_uncertainty_s

@@ -650,6 +650,7 @@ def track_video(
     sigma: dict[str, list[float]] = {"lead": [], "trail": []}
     reasons: list[str] = []
     led_signal: list[float] = []
+    led_peak_dn: list[float] = []  # brightest luma in the LED's disk, first lit frames (YUV engines)
     warnings: list[str] = []
     repeated: list[bool] = []
     snapshot = None
@@ -661,7 +662,7 @@ def track_video(
     if engine != "reference-rgb":
         (snapshot, snapshot_index) = _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec,
                                                led_model, progress, times, xy, area, sigma, reasons,
-                                               led_signal, warnings, repeated)
+                                               led_signal, warnings, repeated, led_peak_dn)
     else:
         for frame in iter_frames(path, fields=fields):
             rgb = frame.rgb
@@ -782,6 +783,8 @@ def track_video(
 
     led_level = np.full(n, np.nan)
     t0 = t0_unc = None
+    led_peak = max((p for p in led_peak_dn if math.isfinite(p)), default=math.nan)
+    led_clipped = led_peak >= _LED_CLIP_DN
     if led_signal and np.isfinite(led_signal).sum() >= 3:
         signal = np.asarray(led_signal, dtype=np.float64)
         good = np.flatnonzero(np.isfinite(signal))
@@ -793,6 +796,16 @@ def track_video(
             t0, t0_unc, why = _led_switch_time(time_s, led_level, settings.exposure_s)
             if why:
                 warnings.append(why)
+            if t0 is not None and led_clipped:
+                # A clipped LED reads fully lit for part of the exposure it was not: the
+                # partly lit frame's level, and so t0 within that frame, is not known.
+                period = float(np.median(np.diff(time_s))) if n > 1 else 0.0
+                exposure = period if settings.exposure_s is None else min(settings.exposure_s, period)
+                t0_unc = max(t0_unc or 0.0, exposure / math.sqrt(12.0))
+                warnings.append(
+                    f"LED at the video's white level (luma {led_peak:.0f}): a clipped LED's "
+                    "partly lit frame looks brighter than it was, so t0 is known only to within its "
+                    f"exposure (±{1e3 * t0_unc:.2f} ms, 1σ); dim the LED or shorten the exposure")
             if t0 is not None and settings.readout_s > 0:
                 # The LED's rows are exposed readout·y/H after the frame time. Its
                 # position before the input starts is where it switched (the
@@ -1223,7 +1236,7 @@ def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Bl
 
 
 def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec, led_model, progress, times, xy,
-              area, sigma, reasons, led_signal, warnings, repeated):
+              area, sigma, reasons, led_signal, warnings, repeated, led_peak_dn):
     """Per-frame loop of the YUV engines; fills the per-frame lists; returns (snapshot, snapshot_index)."""
     kernel = K.ENGINES[engine]
     led_kernel = K.LED_ENGINES[engine]
@@ -1346,9 +1359,32 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
             if led_local is not None and slow:
                 led_kernel(frame.y, led_prm, out, led_out)
             led_signal.append(float(led_out[0]) if led_local is not None and len(found) == 2 else math.nan)
+            if led_local is not None and len(found) == 2 and len(led_peak_dn) < _LED_PEAK_FRAMES:
+                led_peak_dn.append(_disk_peak(frame.y, led_out[2], led_out[3], led_prm[3]))
         if progress is not None and frame.index % 50 == 0:
             progress(frame.index + 1)
     return snapshot, snapshot_index
+
+
+#: Frames whose brightest LED pixel is checked for clipping, and the luma that counts as
+#: clipped: 2 DN below the limited-range white (235) that camcorders record; full-range
+#: footage (white 255) with an LED this bright is at least close to clipping too.
+_LED_PEAK_FRAMES = 5
+_LED_CLIP_DN = 233.0
+
+
+def _disk_peak(Y, cx: float, cy: float, r: float) -> float:
+    """Brightest luma within radius ``r`` of (cx, cy); NaN when the disk is off the image."""
+    if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
+        return math.nan
+    h, w = Y.shape
+    x0, x1 = max(0, int(math.floor(cx - r))), min(w, int(math.floor(cx + r)) + 1)
+    y0, y1 = max(0, int(math.floor(cy - r))), min(h, int(math.floor(cy + r)) + 1)
+    if x1 <= x0 or y1 <= y0:
+        return math.nan
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    return float(np.asarray(Y[y0:y1, x0:x1])[inside].max()) if inside.any() else math.nan
 
 
 def _same_image(a, b) -> bool:
