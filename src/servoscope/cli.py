@@ -161,9 +161,11 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     s = result.summary()
     t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
     sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
-    noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}°"
+    noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}° from pixel noise"
+    if s.get("angle_noise_measured_rad") is not None:
+        noise = f"{math.degrees(s['angle_noise_measured_rad']):.4f}° measured ({noise})"
     click.echo(f"{video.name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
-               f"sticker separation {sep}, angle noise {noise} (1σ, pixel noise only), LED switch t0 = {t0}; wrote {out_csv}")
+               f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
     if overlay is not None:

@@ -18,13 +18,20 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ServoscopeError
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
     from .tracker import Track
 
-__all__ = ["angle_error_analysis", "plot_angle_error", "worst_case_angle_error_rad"]
+__all__ = ["angle_error_analysis", "plot_angle_error", "rigid_motion_null", "worst_case_angle_error_rad"]
+
+
+#: Frames the null channel's RMS needs to be a usable estimate (±16 % at 20 independent frames).
+_MIN_NULL_FRAMES = 20
 
 
 def worst_case_angle_error_rad(separation_px: np.ndarray | float, centroid_error_px: float = 1.0) -> np.ndarray:
@@ -48,6 +55,64 @@ def _empirical_noise_rad(angle_rad: np.ndarray) -> float | None:
     return float(np.median(np.abs(d2)) / 0.6745 / math.sqrt(6.0))
 
 
+def rigid_motion_null(
+    lead_xy_px: ArrayLike, trail_xy_px: ArrayLike, valid: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """A null channel of two markers on a rigid blade, in angle units (rad).
+
+    A rigid blade turning about a fixed axis moves each marker across the
+    line joining them by ``r_i * sin(theta)`` (``r_i``: its signed distance
+    from the axis), so ``d_a - rho * d_b`` with ``rho = r_a / r_b`` holds no
+    motion at all: whatever the blade does, linear or not, cancels. What is
+    left are the two markers' own measurement errors, among them those
+    locked to the motion (pixel locking, codec artefacts), which repeat at
+    the harmonics of a sine dwell. ``rho`` is the least-squares slope of
+    ``d_a`` on ``d_b`` over the valid frames (the marker that moves more as
+    ``b``, so ``|rho| <= 1``). Scaled by ``sqrt(2 / (1 + rho**2)) / L``
+    (``L``: the markers' mean separation), the channel has, for independent
+    errors of equal size in both markers, the size of the angle's error
+    ``(e_a - e_b) / L``.
+
+    Parameters
+    ----------
+    lead_xy_px, trail_xy_px : array_like, shape (n, 2)
+        Marker centroids (px); NaN where not found.
+    valid : array_like of bool, shape (n,), optional
+        Frames to use (default: where both are finite).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        The null channel in rad (mean zero), NaN where invalid; all NaN
+        when fewer than 3 frames are usable or the markers do not move.
+    """
+    lead = np.asarray(lead_xy_px, dtype=float).reshape(-1, 2)
+    trail = np.asarray(trail_xy_px, dtype=float).reshape(-1, 2)
+    if lead.shape != trail.shape:
+        raise ServoscopeError("rigid_motion_null: lead and trail have different shapes")
+    ok = np.all(np.isfinite(lead), axis=1) & np.all(np.isfinite(trail), axis=1)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool).ravel()
+    out = np.full(lead.shape[0], np.nan)
+    if np.count_nonzero(ok) < 3:
+        return out
+    line = np.mean(lead[ok] - trail[ok], axis=0)
+    sep = math.hypot(float(line[0]), float(line[1]))
+    if not sep > 0:
+        return out
+    normal = np.array([-line[1], line[0]]) / sep
+    da, db = lead @ normal, trail @ normal
+    va, vb = float(np.var(da[ok])), float(np.var(db[ok]))
+    if va > vb:
+        da, db, va, vb = db, da, vb, va
+    if not vb > 0:
+        return out
+    xa, xb = da[ok] - da[ok].mean(), db[ok] - db[ok].mean()
+    rho = float(xa @ xb) / float(xb @ xb)
+    out[ok] = (xa - rho * xb) * math.sqrt(2.0 / (1.0 + rho * rho)) / sep
+    return out
+
+
 def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dict:
     """Angle error budget of one track (plain types, for reports).
 
@@ -66,7 +131,12 @@ def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dic
         ``worst_case_rad`` / ``worst_case_deg`` (atan(quantization_px / L)),
         ``angle_sigma_rad`` / ``angle_sigma_deg`` (√(σ_lead² + σ_trail²) / L),
         ``empirical_noise_rad`` / ``empirical_noise_deg`` (from second
-        differences of the angle; None with too few frames),
+        differences of the angle; an upper bound while the blade moves;
+        None with too few frames),
+        ``measured_noise_rad`` / ``measured_noise_deg`` (the RMS of the
+        markers' :func:`rigid_motion_null` channel: the tracking error
+        itself, codec errors included, whatever the blade does; None with
+        fewer than 20 frames),
         ``quantization_px``, ``valid_frames``.
         Values are None when no frame is valid.
     """
@@ -76,7 +146,8 @@ def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dic
     out: dict = {"quantization_px": float(quantization_px), "valid_frames": int(valid.sum())}
     if sep.size == 0:
         for k in ("separation_px", "separation_std_px", "centroid_sigma_px", "worst_case_rad", "worst_case_deg",
-                  "angle_sigma_rad", "angle_sigma_deg", "empirical_noise_rad", "empirical_noise_deg"):
+                  "angle_sigma_rad", "angle_sigma_deg", "empirical_noise_rad", "empirical_noise_deg",
+                  "measured_noise_rad", "measured_noise_deg"):
             out[k] = None
         return out
     length = float(np.mean(sep))
@@ -87,6 +158,8 @@ def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dic
     angle_sigma = float(np.median(np.hypot(s_lead[both], s_trail[both]))) / length if both.any() else None
     worst = float(worst_case_angle_error_rad(length, quantization_px))
     emp = _empirical_noise_rad(np.where(valid, track.angle_rad, np.nan))
+    null = rigid_motion_null(track.lead_xy_px, track.trail_xy_px, valid)
+    measured = float(np.nanstd(null)) if np.count_nonzero(np.isfinite(null)) >= _MIN_NULL_FRAMES else None
     out.update({
         "separation_px": length,
         "separation_std_px": float(np.std(sep)),
@@ -97,6 +170,8 @@ def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dic
         "angle_sigma_deg": None if angle_sigma is None else math.degrees(angle_sigma),
         "empirical_noise_rad": emp,
         "empirical_noise_deg": None if emp is None else math.degrees(emp),
+        "measured_noise_rad": measured,
+        "measured_noise_deg": None if measured is None else math.degrees(measured),
     })
     return out
 
@@ -140,8 +215,12 @@ def plot_angle_error(analysis: dict, *, ax=None, separation_range_px: tuple[floa
         ax.plot([sep], [analysis["worst_case_deg"]], "o", color="C0")
         if analysis.get("angle_sigma_deg"):
             ax.plot([sep], [analysis["angle_sigma_deg"]], "o", color="C1")
-        if analysis.get("empirical_noise_deg"):
-            ax.plot([sep], [analysis["empirical_noise_deg"]], "s", color="C2", label="measured angle noise")
+        if analysis.get("measured_noise_deg"):
+            ax.plot([sep], [analysis["measured_noise_deg"]], "s", color="C2",
+                    label="measured angle noise (rigid-motion null channel)")
+        elif analysis.get("empirical_noise_deg"):
+            ax.plot([sep], [analysis["empirical_noise_deg"]], "s", color="C2",
+                    label="angle noise from 2nd differences (upper bound)")
         ax.annotate(f"L = {sep:.0f} px", (sep, ax.get_ylim()[0]), textcoords="offset points", xytext=(4, 6), fontsize=8)
     ax.set_xlabel("sticker separation L (px)")
     ax.set_ylabel("angle error (deg)")

@@ -228,9 +228,12 @@ class Track:
 
         Keys ``video, frames, valid_frames, t0_s, t0_uncertainty_s, warnings``
         plus ``valid_fraction``, ``mean_separation_px``,
-        ``centroid_sigma_px`` (median per-frame centroid uncertainty) and
-        ``angle_noise_rad`` (the statistical angle error, see
-        :func:`servoscope.markers.angle_error_analysis`).
+        ``centroid_sigma_px`` (median per-frame centroid uncertainty),
+        ``angle_noise_rad`` (the statistical angle error from pixel noise,
+        see :func:`servoscope.markers.angle_error_analysis`) and
+        ``angle_noise_measured_rad`` (the tracking error measured on the
+        markers' rigid-motion null channel, codec errors included; None
+        with fewer than 20 valid frames).
         """
         from .error_analysis import angle_error_analysis
 
@@ -243,6 +246,7 @@ class Track:
             "mean_separation_px": analysis.get("separation_px"),
             "centroid_sigma_px": analysis.get("centroid_sigma_px"),
             "angle_noise_rad": analysis.get("angle_sigma_rad"),
+            "angle_noise_measured_rad": analysis.get("measured_noise_rad"),
             "t0_s": self.t0_s,
             "t0_uncertainty_s": self.t0_uncertainty_s,
             "warnings": list(self.warnings),

@@ -251,7 +251,11 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                 plot_angle_error(analysis),
                 f"Angle error against sticker separation (paper Fig. 6): at {analysis['separation_px']:.0f} px, "
                 f"a 1 px centroid error bounds the angle error at {analysis['worst_case_deg']:.3f}°; the measured "
-                f"centroid noise ({analysis['centroid_sigma_px']:.3f} px) gives {analysis['angle_sigma_deg']:.4f}° (1σ).",
+                f"centroid noise from the pixels ({analysis['centroid_sigma_px']:.3f} px) gives "
+                f"{analysis['angle_sigma_deg']:.4f}° (1σ)"
+                + (f"; the tracking error measured on the two markers' rigid-motion null channel, codec errors "
+                   f"included, is {analysis['measured_noise_deg']:.4f}° RMS." if analysis.get("measured_noise_deg")
+                   else "."),
                 "Error analysis",
                 name="error_analysis",
             )

@@ -67,6 +67,8 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 
 from servoscope.errors import ServoscopeError
+# The null channel is a property of the two markers' tracks; re-exported here, where fit_sine uses it.
+from servoscope.markers.error_analysis import rigid_motion_null
 
 __all__ = ["SineFit", "fit_sine", "hac_covariance", "newey_west_lag", "rigid_motion_null"]
 
@@ -599,7 +601,7 @@ def fit_sine(
     null_channel : array_like, shape (n,), optional
         A signal from the same measurement, in output units, that the true
         motion does not reach but the measurement's artefacts do (e.g.
-        :func:`rigid_motion_null` of the two markers); NaN where unknown.
+        :func:`~servoscope.markers.error_analysis.rigid_motion_null` of the two markers); NaN where unknown.
         Its harmonics at the fitted frequency measure the artefacts that are
         locked to the motion (pixel locking, codec), which no noise model
         can tell from distortion; they are added to the harmonics' variance
@@ -905,61 +907,3 @@ def fit_sine(
         _cos_coef=a,
         _sin_coef=b,
     )
-
-
-def rigid_motion_null(
-    lead_xy_px: ArrayLike, trail_xy_px: ArrayLike, valid: ArrayLike | None = None
-) -> NDArray[np.float64]:
-    """A null channel of two markers on a rigid blade, in angle units (rad).
-
-    A rigid blade turning about a fixed axis moves each marker across the
-    line joining them by ``r_i * sin(theta)`` (``r_i``: its signed distance
-    from the axis), so ``d_a - rho * d_b`` with ``rho = r_a / r_b`` holds no
-    motion at all: whatever the blade does, linear or not, cancels. What is
-    left are the two markers' own measurement errors, among them those
-    locked to the motion (pixel locking, codec artefacts), which repeat at
-    the harmonics of a sine dwell. ``rho`` is the least-squares slope of
-    ``d_a`` on ``d_b`` over the valid frames (the marker that moves more as
-    ``b``, so ``|rho| <= 1``). Scaled by ``sqrt(2 / (1 + rho**2)) / L``
-    (``L``: the markers' mean separation), the channel has, for independent
-    errors of equal size in both markers, the size of the angle's error
-    ``(e_a - e_b) / L``.
-
-    Parameters
-    ----------
-    lead_xy_px, trail_xy_px : array_like, shape (n, 2)
-        Marker centroids (px); NaN where not found.
-    valid : array_like of bool, shape (n,), optional
-        Frames to use (default: where both are finite).
-
-    Returns
-    -------
-    numpy.ndarray, shape (n,)
-        The null channel in rad (mean zero), NaN where invalid; all NaN
-        when fewer than 3 frames are usable or the markers do not move.
-    """
-    lead = np.asarray(lead_xy_px, dtype=float).reshape(-1, 2)
-    trail = np.asarray(trail_xy_px, dtype=float).reshape(-1, 2)
-    if lead.shape != trail.shape:
-        raise ServoscopeError("rigid_motion_null: lead and trail have different shapes")
-    ok = np.all(np.isfinite(lead), axis=1) & np.all(np.isfinite(trail), axis=1)
-    if valid is not None:
-        ok &= np.asarray(valid, dtype=bool).ravel()
-    out = np.full(lead.shape[0], np.nan)
-    if np.count_nonzero(ok) < 3:
-        return out
-    line = np.mean(lead[ok] - trail[ok], axis=0)
-    sep = math.hypot(float(line[0]), float(line[1]))
-    if not sep > 0:
-        return out
-    normal = np.array([-line[1], line[0]]) / sep
-    da, db = lead @ normal, trail @ normal
-    va, vb = float(np.var(da[ok])), float(np.var(db[ok]))
-    if va > vb:
-        da, db, va, vb = db, da, vb, va
-    if not vb > 0:
-        return out
-    xa, xb = da[ok] - da[ok].mean(), db[ok] - db[ok].mean()
-    rho = float(xa @ xb) / float(xb @ xb)
-    out[ok] = (xa - rho * xb) * math.sqrt(2.0 / (1.0 + rho * rho)) / sep
-    return out
