@@ -60,19 +60,11 @@ def _one_worker_cluster(pinned: bool):
     unpinned it uses ~1.2 cores; pinned, it is exactly one core, the unit
     N workers on N cores are measured against.
     """
-    import cv2
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    from servoscope.video.reader import THREADS_ENV
+    from servoscope.campaign.parallel import start_local_cluster
 
-    method = "fork" if sys.platform.startswith("linux") else "spawn"
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)  # OpenCV's pool does not survive a fork (see servoscope.campaign.parallel)
-    with dask.config.set({"distributed.worker.multiprocessing-method": method}):
-        cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=50, env={"OPENCV_FOR_THREADS_NUM": "1", THREADS_ENV: "1"})
-    cv2.setNumThreads(threads)
+    cluster = start_local_cluster(1, 1, silence_logs=50)
     try:
         if pinned:
             with Client(cluster) as client:

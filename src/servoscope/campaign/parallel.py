@@ -35,7 +35,7 @@ from ..markers.tracker import Track, TrackerSettings, track_video
 from ..video.reader import THREADS_ENV
 from .cache import TrackCache
 
-__all__ = ["track_many", "default_workers", "ProgressFn", "DoneFn"]
+__all__ = ["track_many", "default_workers", "start_local_cluster", "ProgressFn", "DoneFn"]
 
 #: ``progress(label, frames_done, test_index)``: in-process, called every 50
 #: frames and at the end of each video; on Dask, once per video, when its
@@ -247,12 +247,56 @@ def _size(path) -> int:
         return 0
 
 
+def start_local_cluster(n_workers: int | None, threads_per_worker_video: int, *, fork: bool = True,
+                        silence_logs: int = logging.CRITICAL):
+    """A ``distributed.LocalCluster`` of single-threaded worker processes for tracking.
+
+    Parameters
+    ----------
+    n_workers : int or None
+        Worker processes (None: Dask's default).
+    threads_per_worker_video : int
+        Threads each worker's video may use (decoder, OpenCV's pool), given to
+        the workers as ``SERVOSCOPE_THREADS`` (see
+        :func:`servoscope.video.reader.thread_budget`).
+    fork : bool
+        Fork the workers where that is safe (Linux): they start in ~0.2 s,
+        warm, with servoscope, numba's compiled kernels and OpenCV already
+        loaded, where spawned ones took 2–3 s to start and import, most of a
+        2-core machine's gain. Nothing of this process is used by a worker but
+        the imported code, and no decoder thread runs while the cluster
+        starts. False (e.g. for CUDA, whose context does not survive a fork):
+        spawned.
+    silence_logs : int
+        Logging level of the workers.
+    """
+    import cv2
+    import dask
+    from distributed import LocalCluster
+
+    method = "fork" if fork and sys.platform.startswith("linux") else "spawn"
+    share = str(int(threads_per_worker_video))
+    # OpenCV's thread pool does not survive a fork: a child that touches a pool
+    # this process has used hangs (measured: in pthread_cond_destroy). With one
+    # thread the pool has no threads of its own, so it is set to one while the
+    # workers are forked, and given back after.
+    opencv_threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+            return LocalCluster(
+                n_workers=n_workers, threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=silence_logs,
+                env={"OPENCV_FOR_THREADS_NUM": share, THREADS_ENV: share},
+            )
+    finally:
+        cv2.setNumThreads(opencv_threads)
+
+
 @contextmanager
 def _client(n_workers: int | None, scheduler: str | None, settings_backend: str = "auto") -> Iterator:
     """A Dask client on a fresh local cluster or on ``scheduler``; closed on exit."""
-    import cv2
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     # CRITICAL, not ERROR: a video that fails is an expected outcome that
     # comes back to us as its exception (and, with keep_going, a warning);
@@ -270,29 +314,8 @@ def _client(n_workers: int | None, scheduler: str | None, settings_backend: str 
             # cores / workers threads, as Dask keeps BLAS/OpenMP to one thread
             # per worker (more would fight over the same cores). The tracks are
             # the same bytes whatever the thread count (tested).
-            share = str(max(1, default_workers() // max(1, n_workers or 1)))
-            # Workers forked from this process (Linux) start in ~0.2 s, warm:
-            # servoscope, numba's compiled kernels and OpenCV are already
-            # loaded; spawned ones took 2–3 s to start and import, which was
-            # most of a 2-core machine's gain. Nothing of this process is used
-            # by a worker but the imported code, and no decoder thread runs
-            # while the cluster starts. A CUDA context does not survive a fork.
-            method = "fork" if sys.platform.startswith("linux") and settings_backend != "cuda" else "spawn"
-            # OpenCV's thread pool does not survive a fork: a child that touches a pool
-            # this process has used hangs (measured: in pthread_cond_destroy). With one
-            # thread the pool has no threads of its own, so it is set to one while the
-            # workers are forked, and given back after.
-            opencv_threads = cv2.getNumThreads()
-            cv2.setNumThreads(1)
-            try:
-                with dask.config.set({"distributed.worker.multiprocessing-method": method}):
-                    cluster = LocalCluster(
-                        n_workers=n_workers, threads_per_worker=1, processes=True,
-                        dashboard_address=None, silence_logs=quiet,
-                        env={"OPENCV_FOR_THREADS_NUM": share, THREADS_ENV: share},
-                    )
-            finally:
-                cv2.setNumThreads(opencv_threads)
+            share = max(1, default_workers() // max(1, n_workers or 1))
+            cluster = start_local_cluster(n_workers, share, fork=settings_backend != "cuda", silence_logs=quiet)
             client = Client(cluster)
         else:
             try:

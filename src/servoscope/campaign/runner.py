@@ -109,6 +109,11 @@ def _t0(test: TestSpec, track: Track) -> float | None:
     return test.t0_s if test.t0_s is not None else track.t0_s
 
 
+def _t0_stderr(test: TestSpec, track: Track) -> float | None:
+    """Standard uncertainty of :func:`_t0` (s): the LED's, or 0 for a t0 typed in the manifest."""
+    return track.t0_uncertainty_s if test.t0_s is None else 0.0
+
+
 @dataclass
 class IdentificationResult:
     """Everything one identification produced.
@@ -180,7 +185,7 @@ class IdentificationResult:
                 "frames": track.n_frames,
                 "valid_frames": track.n_valid,
                 "t0_s": _t0(test, track),
-                "t0_uncertainty_s": track.t0_uncertainty_s if test.t0_s is None else 0.0,
+                "t0_uncertainty_s": _t0_stderr(test, track),
                 "warnings": list(track.warnings),
             }
             fit = self.sine_fits.get(test.label)
@@ -332,7 +337,7 @@ def identify(
                 track.angle_rad,
                 test.frequency_hz,
                 t0_s=t0,
-                t0_stderr_s=track.t0_uncertainty_s if test.t0_s is None else None,
+                t0_stderr_s=_t0_stderr(test, track),
                 settle_s=campaign.settle_s,
                 valid=track.valid,
                 # Harmonics the two markers do not share are tracking
@@ -382,7 +387,7 @@ def identify(
                     step_size=test.amplitude,
                     valid=track.valid,
                     model=model.transfer_function,
-                    t0_stderr_s=track.t0_uncertainty_s if test.t0_s is None else None,
+                    t0_stderr_s=_t0_stderr(test, track),
                 )
             except ServoscopeError as exc:
                 warnings.append(f"{test.label}: step test left out: {exc}")

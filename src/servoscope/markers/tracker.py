@@ -525,6 +525,12 @@ def _led_level_noise(level: np.ndarray, k: int) -> float:
     return min(max(sigma, _LED_NOISE_FLOOR), _LED_NOISE_CAP)
 
 
+def _frame_period_and_exposure(time_s: np.ndarray, exposure_s: float | None) -> tuple[float, float]:
+    """Median frame interval (s) and the exposure (s): the given one, at most one interval; else one interval."""
+    period = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
+    return period, period if exposure_s is None else min(float(exposure_s), period)
+
+
 def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | None) -> tuple[float | None, float | None, str | None]:
     """Sub-frame time at which a lit LED switches off, and its standard uncertainty (s).
 
@@ -553,8 +559,7 @@ def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | 
     if first_off.size == 0:
         return None, None, "LED never switches off: no input start found"
     k = int(first_off[0])
-    period = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
-    exposure = period if exposure_s is None else min(float(exposure_s), period)
+    period, exposure = _frame_period_and_exposure(time_s, exposure_s)
     noise = _led_level_noise(level, k)
     contiguous = (k >= 1 and exposure > 0 and exposure >= 0.999 * period
                   and abs(float(time_s[k] - time_s[k - 1]) - period) < 0.01 * period)
@@ -803,8 +808,7 @@ def track_video(
             if t0 is not None and led_clipped:
                 # A clipped LED reads fully lit for part of the exposure it was not: the
                 # partly lit frame's level, and so t0 within that frame, is not known.
-                period = float(np.median(np.diff(time_s))) if n > 1 else 0.0
-                exposure = period if settings.exposure_s is None else min(settings.exposure_s, period)
+                exposure = _frame_period_and_exposure(time_s, settings.exposure_s)[1]
                 t0_unc = max(t0_unc or 0.0, exposure / math.sqrt(12.0))
                 warnings.append(
                     f"LED at the video's white level (luma {led_peak:.0f}): a clipped LED's "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 from collections.abc import Sequence
@@ -269,19 +270,7 @@ class FrequencyResponse:
             raise ServoscopeError(
                 f"exposure {e:g} s spans a whole period at {self.frequency_hz.max():g} Hz: the motion averages out"
             )
-        return FrequencyResponse(
-            frequency_hz=self.frequency_hz,
-            gain=self.gain / factor,
-            gain_stderr=self.gain_stderr / factor,
-            phase_deg=self.phase_deg,
-            phase_stderr_deg=self.phase_stderr_deg,
-            fidelity=self.fidelity,
-            labels=self.labels,
-            frequency_stderr_hz=self.frequency_stderr_hz,
-            thd=self.thd,
-            flags=self.flags,
-            warnings=self.warnings,
-        )
+        return dataclasses.replace(self, gain=self.gain / factor, gain_stderr=self.gain_stderr / factor)
 
     def _rows(self) -> list[dict[str, Any]]:
         cols = {
