@@ -259,11 +259,12 @@ def test_stderr_scaled_by_reduced_chi_square_only_when_it_exceeds_one():
     over6 = fit_second_order(fr_from(g, 0.030 * g))
     assert over3.natural_frequency_rad_s == pytest.approx(under3.natural_frequency_rad_s, rel=1e-8)
     for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
-        assert under6.stderr[name] == pytest.approx(under3.stderr[name], rel=1e-6)
+        # The Jacobian's errors (the jackknife's check is tested below).
+        assert under6.stderr_jacobian[name] == pytest.approx(under3.stderr_jacobian[name], rel=1e-6)
         # chi^2/dof < 1: the stated errors set the scale, so twice the errors
         # give twice the standard errors.
-        assert over6.stderr[name] == pytest.approx(2.0 * over3.stderr[name], rel=1e-6)
-        assert over3.stderr[name] > 2.0 * under3.stderr[name]
+        assert over6.stderr_jacobian[name] == pytest.approx(2.0 * over3.stderr_jacobian[name], rel=1e-6)
+        assert over3.stderr_jacobian[name] > 2.0 * under3.stderr_jacobian[name]
     # The unconditionally scaled (nlinfit) standard errors, computed here from
     # the Jacobian of the same fit, equal the inflated ones.
     chi2 = 2.0 * under3.cost
@@ -312,3 +313,53 @@ def test_complex_fit_on_a_sparse_sweep_finds_the_delay(phase_se_deg):
     assert r.dead_time_s == pytest.approx(TAU, abs=2e-3)
     assert r.gain == pytest.approx(K, rel=0.01)
     assert r.natural_frequency_rad_s == pytest.approx(WN, rel=0.02)
+
+
+def test_jackknife_widens_an_interval_that_rests_on_one_biased_dwell():
+    """One dwell with a systematic error (as H.264 gives the smallest motions) moves ωn far more than
+    its stated error allows; the Jacobian cannot see it, the delete-one jackknife does.
+
+    Oracle: the delete-one fits made from scratch (multi-start, no warm start) by the public API.
+    """
+    from servoscope.sysid import fit_transfer_function
+
+    rng = np.random.default_rng(5)
+    g = np.abs(true_response()) * (1 + 0.001 * rng.standard_normal(14))
+    g[-1] *= 0.98  # the 15 Hz dwell 2 % low: 20 times its stated error
+    fr = fr_from(g, 0.001 * g)
+    fit = fit_transfer_function(fr, order=(0, 2), mode="magnitude")
+    name = "natural_frequency_rad_s"
+    dof = fit.n_residuals - fit.n_params
+    from scipy.stats import t as student_t
+
+    half_jacobian = student_t.ppf(0.975, dof) * fit.stderr_jacobian[name]
+    assert abs(fit.params[name] - WN) > half_jacobian  # the Jacobian's interval misses the truth
+    assert fit.ci95[name][0] <= WN <= fit.ci95[name][1]  # the stated one does not
+    assert fit.stderr[name] == pytest.approx(max(fit.stderr_jacobian[name], fit.stderr_jackknife[name]))
+    assert fit.influence[name]["dwell"] == fr.labels[-1]
+
+    without = []
+    for i in range(14):
+        keep = np.delete(np.arange(14), i)
+        sub = FrequencyResponse(frequency_hz=F_HZ[keep], gain=g[keep], gain_stderr=0.001 * g[keep],
+                                phase_deg=None, phase_stderr_deg=None, fidelity=np.ones(13), labels=None)
+        without.append(fit_transfer_function(sub, order=(0, 2), mode="magnitude", jackknife=False).params)
+    assert fit.influence[name]["without"] == pytest.approx(without[-1][name], rel=1e-6)
+    for key in ("gain", name, "damping_ratio"):
+        v = np.array([w[key] for w in without])
+        expected = math.sqrt(13 / 14 * np.sum((v - v.mean()) ** 2))
+        assert fit.stderr_jackknife[key] == pytest.approx(expected, rel=1e-4)
+    # The covariance follows the stated errors; the summary carries both kinds.
+    assert math.sqrt(fit.covariance[1, 1]) == pytest.approx(fit.stderr[name], rel=1e-9)
+    summary = fit.summary()
+    assert summary["stderr_jackknife"][name] == pytest.approx(fit.stderr_jackknife[name])
+    assert summary["influence"][name]["dwell"] == fr.labels[-1]
+
+
+def test_no_jackknife_when_too_few_dwells():
+    from servoscope.sysid import fit_transfer_function
+
+    g = np.abs(true_response())[:4] * np.array([1.0, 1.001, 0.999, 1.0])
+    fit = fit_transfer_function(fr_from(g, 0.001 * g), order=(0, 2), mode="magnitude")
+    assert fit.stderr_jackknife is None and fit.influence is None
+    assert fit.stderr == fit.stderr_jacobian

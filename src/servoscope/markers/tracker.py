@@ -320,8 +320,10 @@ class _MarkerTracker:
         self.seed = spec
         self.model: ColourModel | None = None if spec == AUTO else ColourModel.from_seed(spec)  # type: ignore[arg-type]
         self.expected_area: float | None = None  # binary area of the hue mask (px²)
-        self.last_xy: np.ndarray | None = None
-        self.velocity = np.zeros(2)
+        # Position and velocity as Python floats: updated every frame, where small-array NumPy costs
+        # more than the arithmetic.
+        self._last: tuple[float, float] | None = None
+        self._velocity: tuple[float, float] = (0.0, 0.0)
         self.search_radius_px = settings.search_radius_px
         self.margin_px = settings.support_margin_px
         self.method = settings.centroid
@@ -338,8 +340,25 @@ class _MarkerTracker:
         n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         return labels, stats[1:], n - 1
 
+    @property
+    def last_xy(self) -> np.ndarray | None:
+        """The last accepted centroid (px), None before the first."""
+        return None if self._last is None else np.array(self._last)
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Smoothed centroid motion per frame (px)."""
+        return np.array(self._velocity)
+
+    def predicted_xy(self) -> tuple[float, float] | None:
+        """Where the marker should be in this frame (px): last position plus velocity."""
+        if self._last is None:
+            return None
+        return self._last[0] + self._velocity[0], self._last[1] + self._velocity[1]
+
     def predicted(self) -> np.ndarray | None:
-        return None if self.last_xy is None else self.last_xy + self.velocity
+        p = self.predicted_xy()
+        return None if p is None else np.array(p)
 
     def find(self, rgb: np.ndarray) -> tuple[_Blob | None, str]:
         """The marker's blob in this frame, or None and why not."""
@@ -434,10 +453,11 @@ class _MarkerTracker:
 
     def accept(self, blob: _Blob, rgb: np.ndarray, binary_area: float | None = None) -> None:
         """Take a blob as this frame's position (also when it is flagged)."""
-        xy = np.array([blob.moments.x_px, blob.moments.y_px])
-        if self.last_xy is not None:
-            self.velocity = 0.5 * self.velocity + 0.5 * (xy - self.last_xy)
-        self.last_xy = xy
+        x, y = blob.moments.x_px, blob.moments.y_px
+        if self._last is not None:
+            vx, vy = self._velocity
+            self._velocity = (0.5 * vx + 0.5 * (x - self._last[0]), 0.5 * vy + 0.5 * (y - self._last[1]))
+        self._last = (x, y)
         if blob.flaw:
             return
         m = blob.moments
@@ -476,7 +496,7 @@ class _MarkerTracker:
         self.extent_px = r
 
     def lose(self) -> None:
-        self.velocity = np.zeros(2)
+        self._velocity = (0.0, 0.0)
 
 
 def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
@@ -592,8 +612,7 @@ def _record_markers(frame, found: dict, xy: dict, area: dict, sigma: dict) -> No
     for name in ("lead", "trail"):
         if name in found:
             m = found[name].moments
-            point = frame.to_frame_xy(np.array([m.x_px, m.y_px]))
-            xy[name].append((float(point[0]), float(point[1])))
+            xy[name].append((float(m.x_px), float(frame.row_offset + frame.row_step * m.y_px)))
             area[name].append(m.m00 * frame.row_step)
             sigma[name].append(found[name].sigma_px * math.sqrt(0.5 * (1 + frame.row_step**2)))
         else:
@@ -1204,7 +1223,7 @@ def _separate_hues(states: list[_YuvState], led_rgb) -> None:
 
 def _window(tracker: _MarkerTracker, shape, centre=None) -> tuple[int, int, int, int] | None:
     h, w = shape
-    c = tracker.predicted() if centre is None else centre
+    c = tracker.predicted_xy() if centre is None else centre
     if c is None:
         return None
     r = tracker.search_radius_px + tracker.extent_px if centre is None else tracker.extent_px + 6.0
@@ -1220,6 +1239,7 @@ def _window(tracker: _MarkerTracker, shape, centre=None) -> tuple[int, int, int,
 def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Blob | None:
     """The marker's blob from its kernel output row, or None when the window's class is implausible."""
     st = tracker.yuv
+    row = row.tolist()  # Python floats: indexing and arithmetic on NumPy scalars cost more
     n = row[K.Q.N]
     if not n > 0 or not row[K.Q.M00] > 0:
         return None
@@ -1233,12 +1253,11 @@ def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Bl
         return None
     if math.hypot(row[K.Q.X] - row[K.Q.BX], row[K.Q.Y] - row[K.Q.BY]) > 0.5 * tracker.extent_px + 2.0:
         return None
-    m = Moments(float(row[K.Q.M00]), float(row[K.Q.X]), float(row[K.Q.Y]), float(row[K.Q.MU20]),
-                float(row[K.Q.MU11]), float(row[K.Q.MU02]))
-    radius = st.prm[K.P.RADIUS]
+    m = Moments(row[K.Q.M00], row[K.Q.X], row[K.Q.Y], row[K.Q.MU20], row[K.Q.MU11], row[K.Q.MU02])
+    radius = float(st.prm[K.P.RADIUS])
     support_out = m.x_px - radius < 0 or m.y_px - radius < 0 or m.x_px + radius > w - 1 or m.y_px + radius > h - 1
     at_border = bool(support_out or row[K.Q.RING_N] < 8)
-    soft = SoftCentroid(m, math.sqrt(0.5 * (row[K.Q.VAR_X] + row[K.Q.VAR_Y])), radius, float(row[K.Q.CONTRAST]),
+    soft = SoftCentroid(m, math.sqrt(0.5 * (row[K.Q.VAR_X] + row[K.Q.VAR_Y])), radius, row[K.Q.CONTRAST],
                         0.0, at_border)
     return _Blob(m, soft.sigma_px, tracker._flaw(soft))
 

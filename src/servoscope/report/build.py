@@ -118,7 +118,9 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         + "."
     )
     boot = model.ci95_bootstrap or {}
-    header = ["parameter", "value", "standard error", "95 % interval"] + (["95 % bootstrap"] if boot else [])
+    influence = model.influence or {}
+    header = (["parameter", "value", "standard error", "95 % interval"] + (["95 % bootstrap"] if boot else [])
+              + (["dwell it rests on most: value without it"] if influence else []))
     rows = []
     for name in model.param_names:
         lo_hi = model.ci95.get(name)
@@ -129,8 +131,18 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         if boot:
             b = boot.get(name)
             row.append("—" if b is None else format_interval(b[0], b[1], err))
+        if influence:
+            inf = influence.get(name)
+            row.append("—" if inf is None else
+                       f"{inf['dwell']}: {format_with_uncertainty(inf['without'], err)[0]} "
+                       f"({inf['shift_stderr']:+.1f} σ)")
         rows.append(row)
     s.table(header, rows)
+    if model.stderr_jackknife is not None:
+        s.text("Standard errors: the larger of the Jacobian's (scaled by the misfit when the residuals exceed their "
+               "stated errors) and the delete-one-dwell jackknife's, which refits the model with each dwell left "
+               "out: a dwell with an error its own statistics cannot show (the codec shrinking the smallest "
+               "motions, a resonance the model lacks) widens the interval of what rests on it.")
     other = [
         ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
         ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],

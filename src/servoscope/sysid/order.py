@@ -257,7 +257,7 @@ def select_order(
             first_problem = first_problem or problem
             warns.append(f"order ({nb}, {na}) not tried: {problem}")
             continue
-        fit = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros)
+        fit = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros, jackknife=False)
         fits[(nb, na)] = fit
         if fit.undetermined:
             hopeless.add(na)

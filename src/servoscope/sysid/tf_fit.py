@@ -62,6 +62,18 @@ stderr`` in physical units (as ``nlparci``). With ``bootstrap=N`` the
 dwells are also resampled with replacement N times, the model refitted from
 the estimate, and percentile intervals reported (``ci95_bootstrap``).
 
+The Jacobian's errors assume that each dwell's error is what its standard
+error says. A dwell with a systematic error (a codec that shrinks the
+smallest motions, a resonance the model does not have) moves the estimate
+by more than that, and the fit cannot tell. So every fit with at least
+``n_params + 2`` dwells is also refitted with each dwell left out in turn,
+from the estimate (the delete-one jackknife), and each parameter's stated
+standard error is the larger of the two (``stderr_jacobian``,
+``stderr_jackknife``; the covariance is scaled to match, its correlations
+kept): where one dwell carries a parameter, its interval says so.
+``influence`` names, per parameter, the dwell whose removal moves it most
+and the value without it.
+
 Goodness of fit
 ---------------
 CIFER's cost ``J = (20/n) * sum W_gamma * (dB_err**2 + 0.01745 * deg_err**2)``
@@ -620,6 +632,16 @@ class TransferFunctionFit:
         well-posed fit); see the module docstring.
     order_selection : OrderSelection or None
         The comparison of orders when the order was chosen automatically.
+    stderr_jacobian : dict of str to float
+        Standard errors from the Jacobian (Birge-scaled), before the
+        jackknife's check.
+    stderr_jackknife : dict of str to float or None
+        Delete-one-dwell jackknife standard errors (None when there are too
+        few dwells, fewer than ``n_params + 2``).
+    influence : dict of str to dict or None
+        Per parameter, the dwell whose removal moves it most:
+        ``{"dwell": label, "without": value, "shift_stderr": (value without
+        − value) / stated stderr}``.
     """
 
     gain: float
@@ -653,6 +675,9 @@ class TransferFunctionFit:
     n_residuals: int = 0
     order_selection: OrderSelection | None = field(default=None, repr=False, compare=False)
     undetermined: tuple[str, ...] = ()
+    stderr_jacobian: dict[str, float] = field(default_factory=dict, repr=False)
+    stderr_jackknife: dict[str, float] | None = field(default=None, repr=False)
+    influence: dict[str, dict[str, Any]] | None = field(default=None, repr=False)
     _structure: Structure | None = field(default=None, repr=False, compare=False)
     _theta: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
@@ -767,6 +792,9 @@ class TransferFunctionFit:
                 "ci95_bootstrap": None
                 if self.ci95_bootstrap is None
                 else {k: list(v) for k, v in self.ci95_bootstrap.items()},
+                "stderr_jacobian": dict(self.stderr_jacobian),
+                "stderr_jackknife": None if self.stderr_jackknife is None else dict(self.stderr_jackknife),
+                "influence": None if self.influence is None else {k: dict(v) for k, v in self.influence.items()},
                 "fit": {
                     "mode": self.mode,
                     "J": self.J,
@@ -955,6 +983,7 @@ def _build(
         params=params,
         stderr=stderr,
         ci95=ci95,
+        stderr_jacobian=dict(stderr),
         J=jc,
         aic=aic,
         bic=bic,
@@ -963,6 +992,58 @@ def _build(
         undetermined=tuple(undetermined),
         _structure=st,
         _theta=_readonly(theta),
+    )
+
+
+def _with_jackknife(fit: TransferFunctionFit, d: _Data) -> TransferFunctionFit:
+    """The fit with its standard errors checked by the delete-one-dwell jackknife (module docstring)."""
+    st = fit._structure
+    if st is None or fit._theta is None or d.n < st.n_params + 2:
+        return fit
+    names = st.names()
+    se = np.array([fit.stderr_jacobian.get(n, fit.stderr[n]) for n in names])
+    if not np.all(np.isfinite(se) & (se > 0)):
+        return fit
+    use_phase = fit.mode == "complex"
+    rows = np.full((d.n, st.n_params), np.nan)
+    for i in range(d.n):
+        sub = d.take(np.delete(np.arange(d.n), i))
+        if _identifiability_problem(sub, st, fit.mode) is not None:
+            continue
+        sol = _local(st, sub, np.asarray(fit._theta), use_phase)
+        if np.all(np.isfinite(sol.x)):
+            rows[i] = st.physical(st.canonical(sol.x))[0]
+    ok = np.all(np.isfinite(rows), axis=1)
+    m = int(ok.sum())
+    if m < 3:
+        return fit
+    kept = rows[ok]
+    se_jack = np.sqrt((m - 1) / m * np.sum((kept - kept.mean(axis=0)) ** 2, axis=0))
+    se_new = np.maximum(se, se_jack)
+    scale = se_new / se
+    cov = np.asarray(fit.covariance) * scale[:, None] * scale[None, :]
+    dof = fit.n_residuals - fit.n_params
+    tq = float(student_t.ppf(0.975, dof)) if dof > 0 else float("nan")
+    vals = np.array([fit.params[n] for n in names])
+    stderr = {n: float(v) for n, v in zip(names, se_new)}
+    labels = [lab for lab, good in zip(d.labels, ok) if good]
+    influence = {}
+    for k, name in enumerate(names):
+        i = int(np.argmax(np.abs(kept[:, k] - vals[k])))
+        influence[name] = {"dwell": labels[i], "without": float(kept[i, k]),
+                           "shift_stderr": float((kept[i, k] - vals[k]) / se_new[k])}
+    second = st.na == 2
+    return replace(
+        fit,
+        covariance=_readonly(cov),
+        stderr=stderr,
+        ci95={n: (float(v - tq * e), float(v + tq * e)) for n, v, e in zip(names, vals, se_new)},
+        stderr_jackknife={n: float(v) for n, v in zip(names, se_jack)},
+        influence=influence,
+        gain_stderr=stderr["gain"],
+        natural_frequency_stderr_rad_s=stderr["natural_frequency_rad_s"] if second else None,
+        damping_ratio_stderr=stderr["damping_ratio"] if second else None,
+        dead_time_stderr_s=stderr["dead_time_s"] if st.delay else None,
     )
 
 
@@ -1015,6 +1096,7 @@ def fit_transfer_function(
     seed: int | None = 0,
     max_order: int = 4,
     n_starts: int | None = None,
+    jackknife: bool = True,
 ) -> TransferFunctionFit:
     """Fit ``K * N(s)/D(s) * exp(-s*tau)`` of order ``(nb, na)`` to a frequency response.
 
@@ -1048,6 +1130,10 @@ def fit_transfer_function(
         Most local optimizations (from the best quasi-random seeds); default
         ``max(8, 2 * n_params)`` (``max(24, 4 * n_params)`` for free zeros). They stop early once three have ended at
         the same lowest cost.
+    jackknife : bool, default True
+        Check the standard errors by refitting with each dwell left out (see
+        the module docstring); ``select_order`` skips it for the candidates
+        and does it for the chosen one.
 
     Returns
     -------
@@ -1080,19 +1166,23 @@ def fit_transfer_function(
         sel = select_order(fr, mode=mode, max_order=max_order, zeros=zeros)
         best = sel.best
         if bootstrap:
-            best = fit_transfer_function(fr, order=best.order, mode=mode, zeros=zeros, bootstrap=bootstrap, seed=seed, n_starts=n_starts)
+            best = fit_transfer_function(fr, order=best.order, mode=mode, zeros=zeros, bootstrap=bootstrap, seed=seed,
+                                         n_starts=n_starts, jackknife=jackknife)
+        elif jackknife:
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+                best = _with_jackknife(best, _prepare(fr, mode, who)[0])
         return replace(best, order_selection=sel)
     nb, na = _check_order(order)
     # Wild starting points and undetermined parameters can overflow on the
     # way; every result is checked for finiteness below, so numpy's warnings
     # would only be noise (and errors under pytest's filter).
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        return _fit_fixed_order(fr, nb, na, mode, zeros, bootstrap, seed, n_starts, who)
+        return _fit_fixed_order(fr, nb, na, mode, zeros, bootstrap, seed, n_starts, who, jackknife)
 
 
 def _fit_fixed_order(
     fr: FrequencyResponse, nb: int, na: int, mode: str, zeros: str, bootstrap: int,
-    seed: int | None, n_starts: int | None, who: str,
+    seed: int | None, n_starts: int | None, who: str, jackknife: bool = True,
 ) -> TransferFunctionFit:
     d, warns = _prepare(fr, mode, who)
     w_ref = float(math.exp(np.mean(np.log(d.w)))) if d.n else 1.0
@@ -1108,6 +1198,8 @@ def _fit_fixed_order(
     if sol is None:
         raise ServoscopeError(f"{who}: the optimizer failed from every starting point (non-finite data?)")
     fit = _build(st, d, fr, sol, mode, warns)
+    if jackknife:
+        fit = _with_jackknife(fit, d)
     if bootstrap:
         samples, ci_b, bw = _bootstrap(fit, d, int(bootstrap), seed)
         fit = replace(
