@@ -1,0 +1,47 @@
+"""Identification on H.264 twin footage at a camcorder's bit rate: do the stated intervals hold?
+
+H.264 at 20 Mbit/s (720×576, 100 frames/s) shrinks the smallest sticker motions: on the
+`paper` preset the 15 Hz dwell (±1 px of marker motion) reads 1.6–2.2 % low, 15–25 times its
+own standard error, and pulls ωn down (docs/accuracy.md, "Identification: stated uncertainty").
+The Jacobian cannot see an error that a dwell's own scatter does not show; the delete-one-dwell
+jackknife can. Seed 1 is the worst of the four measured.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from scipy.stats import t as student_t
+
+from servoscope.campaign import identify, load_campaign
+from servoscope.simulate import simulate_campaign
+
+
+@pytest.fixture(scope="module")
+def h264_campaign(tmp_path_factory):
+    return simulate_campaign(tmp_path_factory.mktemp("h264paper"), preset="paper", seed=1, codec="h264",
+                             bit_rate=20_000_000, include_step=False)
+
+
+@pytest.mark.parametrize("fit", ["magnitude", "complex"])
+def test_h264_intervals_contain_truth(h264_campaign, fit):
+    truth = json.loads((h264_campaign.parent / "truth.json").read_text())["model"]
+    model = identify(load_campaign(h264_campaign), fit=fit).model
+    names = ["gain", "natural_frequency_rad_s", "damping_ratio"] + (["dead_time_s"] if fit == "complex" else [])
+    tq = student_t.ppf(0.975, model.n_residuals - model.n_params)
+    missed_by_jacobian = []
+    for name in names:
+        low, high = model.ci95[name]
+        value, true = model.params[name], truth[name]
+        print(f"{fit} {name}: {value:.6g} [{low:.6g}, {high:.6g}] truth {true}: {(value - true) / model.stderr[name]:+.2f} σ "
+              f"(Jacobian {(value - true) / model.stderr_jacobian[name]:+.2f} σ)")
+        assert low <= true <= high, (fit, name, low, true, high)
+        if abs(value - true) > tq * model.stderr_jacobian[name]:
+            missed_by_jacobian.append(name)
+        # Still intervals that say something: within the issue's accuracy targets.
+        assert (high - low) / 2 < {"damping_ratio": 0.03, "dead_time_s": 0.02}.get(name, 0.01) * true
+    if fit == "magnitude":
+        # What the jackknife is for: on this footage the Jacobian's ωn interval misses the truth.
+        assert "natural_frequency_rad_s" in missed_by_jacobian
+        assert model.influence["natural_frequency_rad_s"]["dwell"].startswith("dwell_14")
