@@ -341,6 +341,11 @@ class _MarkerTracker:
         return labels, stats[1:], n - 1
 
     @property
+    def has_position(self) -> bool:
+        """Whether a centroid has been accepted yet."""
+        return self._last is not None
+
+    @property
     def last_xy(self) -> np.ndarray | None:
         """The last accepted centroid (px), None before the first."""
         return None if self._last is None else np.array(self._last)
@@ -1337,7 +1342,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
         windows = []
         for k, tracker in enumerate(trackers):
             params[k] = tracker.yuv.prm
-            window = _window(tracker, shape) if tracker.last_xy is not None or not slow else None
+            window = _window(tracker, shape) if tracker.has_position or not slow else None
             if window is None and slow:
                 m = first[tracker.name].moments  # the first frame: around the found blob
                 window = _window(tracker, shape, (m.x_px, m.y_px))
