@@ -4,7 +4,7 @@ import json
 
 from click.testing import CliRunner
 
-from servoscope.bench import bench
+from servoscope.bench import _decoder_thread_counts, bench
 
 
 def test_bench_json_on_tiny_clips(tmp_path):
@@ -16,6 +16,9 @@ def test_bench_json_on_tiny_clips(tmp_path):
         row = out["clips"][codec]
         assert row["decode_fps"] > 0 and row["track_fps"] > 0 and row["opencv_fps"] > 0
         assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
+        # Decoding alone is also timed at the thread count it is fastest with, and tracking compared with that.
+        assert row["decode_best_threads"] in _decoder_thread_counts() and row["decode_best_fps"] > 0
+        assert row["track_over_best_decode"] == row["track_fps"] / row["decode_best_fps"]
     # The clips are cached: a second run renders nothing new.
     files = sorted(p.name for p in tmp_path.iterdir())
     res = CliRunner().invoke(bench, ["--frames", "6", "--size", "160x128", "--cache", str(tmp_path), "--workers", "1"])
