@@ -45,3 +45,17 @@ def test_h264_intervals_contain_truth(h264_campaign, fit):
         # What the jackknife is for: on this footage the Jacobian's ωn interval misses the truth.
         assert "natural_frequency_rad_s" in missed_by_jacobian
         assert model.influence["natural_frequency_rad_s"]["dwell"].startswith("dwell_14")
+
+
+def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(h264_campaign), "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    # The table goes to stdout; the warning to stderr, naming the 15 Hz dwell.
+    assert "natural frequency ωn" in proc.stdout
+    assert "warning: natural frequency rests on dwell_14_15.00Hz" in proc.stderr, proc.stderr
+    result = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert any(w.startswith("natural frequency rests on dwell_14") for w in result["warnings"])

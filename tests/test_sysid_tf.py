@@ -337,6 +337,8 @@ def test_jackknife_widens_an_interval_that_rests_on_one_biased_dwell():
     assert fit.ci95[name][0] <= WN <= fit.ci95[name][1]  # the stated one does not
     assert fit.stderr[name] == pytest.approx(max(fit.stderr_jacobian[name], fit.stderr_jackknife[name]))
     assert fit.influence[name]["dwell"] == fr.labels[-1]
+    # ... and says so in a warning that names the dwell.
+    assert any(w.startswith("natural frequency") and fr.labels[-1] in w for w in fit.warnings), fit.warnings
 
     without = []
     for i in range(14):

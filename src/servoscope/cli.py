@@ -332,6 +332,9 @@ def _print_model(result, truth: dict | None = None) -> None:
             cells += [_fmt(true), diff]
         table.add_row(*cells)
     Console(highlight=False, width=112).print(table)
+    # Warnings to stderr, as `track` does: the table on stdout stays what a script parses.
+    for w in result.warnings:
+        click.echo(f"warning: {w}", err=True)
 
 
 def _fmt(value) -> str:
