@@ -448,20 +448,25 @@ def _bin_pair(kf):
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _chroma_neighbours(x, y, row_off, row_step, hc, wc):
-    """:func:`_chroma_neighbours_np` for one luma pixel: (ia, ib, ja, jb, fx, fy)."""
-    cx = (x - 0.5) * 0.5
-    cy = (row_off + row_step * y - 0.5) * 0.5
-    i0f = math.floor(cx)
-    j0f = math.floor(cy)
-    i0 = int(i0f)
-    j0 = int(j0f)
+    """:func:`_chroma_neighbours_np` for one luma pixel (integer x, y): (ia, ib, ja, jb, fx, fy).
+
+    Chroma sample i sits at luma 2i + 0.5, so luma column x lies between
+    samples (x − 1) >> 1 and the next, 3/4 of the way for even x and 1/4 for
+    odd x (the same for frame rows): integer arithmetic, the same values as
+    the reference's floor.
+    """
+    i0 = (x - 1) >> 1
+    r = row_off + row_step * y
+    j0 = (r - 1) >> 1
+    fx = 0.75 if (x & 1) == 0 else 0.25
+    fy = 0.75 if (r & 1) == 0 else 0.25
     return (min(max(i0, 0), wc - 1), min(max(i0 + 1, 0), wc - 1), min(max(j0, 0), hc - 1),
-            min(max(j0 + 1, 0), hc - 1), cx - i0f, cy - j0f)
+            min(max(j0 + 1, 0), hc - 1), fx, fy)
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _chroma_uv_at(U, V, x, y, row_off, row_step):
-    """Bilinear Cb and Cr at luma pixel (x, y), as :func:`_chroma_np` (sample positions computed once)."""
+    """Bilinear Cb and Cr at luma pixel (x, y) (integers), as :func:`_chroma_np`."""
     hc, wc = U.shape
     ia, ib, ja, jb, fx, fy = _chroma_neighbours(x, y, row_off, row_step, hc, wc)
     top = float(U[ja, ia]) * (1.0 - fx) + float(U[ja, ib]) * fx
@@ -473,23 +478,22 @@ def _chroma_uv_at(U, V, x, y, row_off, row_step):
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
-def _block_bilinear(gs, gn, gi0, gj0, x, y, row_off, row_step, hc, wc, own):
-    """Block means ``gs`` (``gn`` pixels each) read as :func:`_chroma_uv_at` reads a plane.
+def _block_bilinear(gs, gm, gi0, gj0, x, y, row_off, row_step, hc, wc, own):
+    """Block means ``gs`` read as :func:`_chroma_uv_at` reads a plane, over the blocks that have pixels.
 
-    ``own`` where none of the four blocks has a pixel.
+    ``gm`` is 1 where a block has pixels, else 0 (and ``gs`` 0 there); the
+    grid has a margin of one empty block all round, so that every tap of a
+    support pixel lies inside it and no tap needs a test. ``own`` where none
+    of the four blocks has a pixel.
     """
     ia, ib, ja, jb, fx, fy = _chroma_neighbours(x, y, row_off, row_step, hc, wc)
     ia, ib, ja, jb = ia - gi0, ib - gi0, ja - gj0, jb - gj0
-    nj, ni = gs.shape
-    num = 0.0
-    wsum = 0.0
-    for q in range(4):
-        j = ja if q < 2 else jb
-        i = ia if q % 2 == 0 else ib
-        w = (fx if q % 2 == 1 else 1.0 - fx) * (fy if q >= 2 else 1.0 - fy)
-        if 0 <= j < nj and 0 <= i < ni and gn[j, i] > 0.0:
-            num = num + w * gs[j, i]
-            wsum = wsum + w
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
+    num = w00 * gs[ja, ia] + w01 * gs[ja, ib] + w10 * gs[jb, ia] + w11 * gs[jb, ib]
+    wsum = w00 * gm[ja, ia] + w01 * gm[ja, ib] + w10 * gm[jb, ia] + w11 * gm[jb, ib]
     return num / wsum if wsum > 0.0 else own
 
 
@@ -609,12 +613,12 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                     buf[ns, 7] = fx
                     buf[ns, 8] = fy
                     buf[ns, 2] = float(Y[y, x])
-                    buf[ns, 3], buf[ns, 4] = _chroma_uv_at(U, V, fx, fy, row_off, row_step)
+                    buf[ns, 3], buf[ns, 4] = _chroma_uv_at(U, V, x, y, row_off, row_step)
                     ns += 1
                     continue
                 if d2 < r_in2 or d2 > r_out2:
                     continue
-                uv, vv = _chroma_uv_at(U, V, fx, fy, row_off, row_step)
+                uv, vv = _chroma_uv_at(U, V, x, y, row_off, row_step)
                 if _is_class(prm, uv, vv):
                     continue
                 yv = float(Y[y, x])
@@ -642,13 +646,14 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                 my[k] = bsy[src] / cnt[src]
                 mu[k] = bsu[src] / cnt[src]
                 mv[k] = bsv[src] / cnt[src]
-        gi0 = ax0 // 2
-        gj0 = (row_off + row_step * ay0) // 2
+        # One empty block of margin all round (see _block_bilinear).
+        gi0 = ax0 // 2 - 1
+        gj0 = (row_off + row_step * ay0) // 2 - 1
         gs = np.zeros((1, 1))
         gn = np.zeros((1, 1))
         if have_bg:
             # Luma's α in 2×2 blocks, as the chroma was sampled (see _luma_alpha_at_chroma_res_np).
-            gs = np.zeros(((row_off + row_step * (ay1 - 1)) // 2 - gj0 + 1, (ax1 - 1) // 2 - gi0 + 1))
+            gs = np.zeros(((row_off + row_step * (ay1 - 1)) // 2 - gj0 + 2, (ax1 - 1) // 2 - gi0 + 2))
             gn = np.zeros_like(gs)
             rf = radius + 3.0
             rf2 = rf * rf
@@ -680,6 +685,7 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                 for i in range(gs.shape[1]):
                     if gn[j, i] > 0.0:
                         gs[j, i] /= gn[j, i]
+                        gn[j, i] = 1.0  # from here on: whether the block has pixels
         m00 = 0.0
         m10 = 0.0
         m01 = 0.0
@@ -716,7 +722,8 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                     aC = 0.0
                     if cc > 0.0:
                         aC = min(max((cU * (uv - bU) + cV * (vv - bV)) / cc, prm[19]), prm[20])
-                    aref = _block_bilinear(gs, gn, gi0, gj0, buf[s, 7], buf[s, 8], row_off, row_step, hc, wc, aY)
+                    aref = _block_bilinear(gs, gn, gi0, gj0, int(buf[s, 7]), int(buf[s, 8]), row_off, row_step, hc,
+                                          wc, aY)
                     trust = min(max((prm[11] + 0.1 - abs(aref - aC)) / 0.2, 0.0), 1.0)
                     gy = wy * cY * cY * trust
                     a = (gy * aY + cc * aC) / (gy + cc) if gy + cc > 0.0 else 0.0
