@@ -416,3 +416,70 @@ def test_tracking_artefacts_are_not_flagged_as_distortion_but_backlash_is():
     assert "distorted" in bl.flags and bl.thd > 0.03
     with pytest.raises(ServoscopeError, match="null_channel"):
         fit_sine(t, angle, 5.0, t0_s=0.0, null_channel=angle[:-1])
+
+
+# ------------------------------------------------------------ the codec check
+def _codec_footage(f_hz, gop=15, shrink=0.97, lag_rad=0.01, seed=3):
+    """A dwell as a codec records it: intra-coded frames (every ``gop``-th) show the true sine; the frames
+    predicted from them show it shrunk and late (as the twin's MPEG-2 does to small motions)."""
+    t = frames(3.0)
+    rng = np.random.default_rng(seed)
+    intra = np.arange(t.size) % gop == 0
+    true = sine(t, 0.02, f_hz, -0.4)
+    coded = np.where(intra, true, sine(t, 0.02 * shrink, f_hz, -0.4 - lag_rad))
+    return t, coded + 2e-5 * rng.standard_normal(t.size), intra
+
+
+def test_codec_check_takes_gain_and_phase_from_intra_frames():
+    t, y, intra = _codec_footage(4.1)
+    plain = fit_sine(t, y, 4.1, t0_s=T0, settle_s=0.3)
+    checked = fit_sine(t, y, 4.1, t0_s=T0, settle_s=0.3, intra=intra)
+    # Without the check the codec's 3 % is in the gain, far beyond its standard error.
+    assert abs(plain.amplitude - 0.02) > 10 * plain.amplitude_stderr
+    assert checked.estimator == "intra frames" and "codec" in checked.flags
+    assert checked.n_intra == int(np.count_nonzero(intra & (t >= T0 + checked.settle_s)))
+    # The truth, within the stated errors.
+    assert abs(checked.amplitude - 0.02) < 3 * checked.amplitude_stderr
+    assert abs(wrap(checked.phase_rad + 0.4)) < 3 * checked.phase_stderr_rad
+    # The codec's effect, measured: the predicted frames (14 of 15) shrink by ~3 % and lag by ~0.01 rad.
+    assert checked.codec_gain_bias == pytest.approx(plain.amplitude / checked.amplitude - 1.0)
+    assert -0.03 < checked.codec_gain_bias < -0.024
+    assert abs(checked.codec_gain_bias + 0.028) < 3 * checked.codec_gain_bias_stderr
+    assert -0.011 < checked.codec_phase_bias_rad < -0.008
+    assert checked.all_frames_amplitude == pytest.approx(plain.amplitude)
+    summary = checked.summary()
+    assert summary["estimator"] == "intra frames" and summary["codec_gain_bias"] == checked.codec_gain_bias
+
+
+def test_codec_check_oracle_is_the_intra_frames_own_least_squares():
+    t, y, intra = _codec_footage(2.3, shrink=0.99)
+    fit = fit_sine(t, y, 2.3, t0_s=T0, settle_s=0.3, intra=intra, refine_frequency=False)
+    sel = intra & (t >= T0 + fit.settle_s)
+    X = np.column_stack([np.ones(sel.sum()), np.sin(2 * np.pi * 2.3 * (t[sel] - T0)),
+                         np.cos(2 * np.pi * 2.3 * (t[sel] - T0))])
+    c, *_ = np.linalg.lstsq(X, y[sel], rcond=None)
+    assert fit.amplitude == pytest.approx(math.hypot(c[1], c[2]), rel=1e-9)
+    assert fit.phase_rad == pytest.approx(math.atan2(c[2], c[1]), abs=1e-9)
+
+
+def test_codec_check_skipped_or_inconclusive():
+    t, y, intra = _codec_footage(4.1)
+    # Every frame intra-coded (uncompressed footage): nothing to check.
+    every = fit_sine(t, y, 4.1, t0_s=T0, settle_s=0.3, intra=np.ones(t.size, bool))
+    assert every.estimator == "all frames" and every.codec_gain_bias is None and every.n_intra == 0
+    # A GOP of seconds: too few intra frames in the window.
+    sparse = fit_sine(t, y, 4.1, t0_s=T0, settle_s=0.3, intra=np.arange(t.size) % 150 == 0)
+    assert sparse.estimator == "all frames" and sparse.codec_gain_bias is None and 0 < sparse.n_intra < 8
+    # I-frames at the dwell's own frequency (100/15 Hz) sample one phase only: the check cannot decide.
+    f = FPS / 15
+    t, y, intra = _codec_footage(f)
+    stuck = fit_sine(t, y, f, t0_s=T0, settle_s=0.3, intra=intra)
+    assert stuck.estimator == "all frames"
+    assert any("codec check impossible" in w for w in stuck.warnings)
+    # Near it (the I-frames' phase drifts by a tenth of a period over the dwell): inconclusive.
+    t, y, intra = _codec_footage(f * 1.012)
+    near = fit_sine(t, y, f * 1.012, t0_s=T0, settle_s=0.3, intra=intra)
+    assert near.estimator == "all frames"
+    assert any("codec check inconclusive" in w for w in near.warnings), near.warnings
+    with pytest.raises(ServoscopeError, match="intra"):
+        fit_sine(t, y, f, t0_s=T0, intra=intra[:-1])

@@ -343,6 +343,8 @@ def identify(
                 # Harmonics the two markers do not share are tracking
                 # artefacts, not distortion (sysid.sine.rigid_motion_null).
                 null_channel=rigid_motion_null(track.lead_xy_px, track.trail_xy_px, track.valid),
+                # The codec check: I-frames show the motion without the codec's prediction.
+                intra=track.intra,
             )
         except ServoscopeError as exc:
             warnings.append(f"{test.label}: dwell left out: {exc}")

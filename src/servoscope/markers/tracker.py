@@ -173,6 +173,10 @@ class Track:
         :func:`_angle_row_weights`). Fit the angle against this.
     readout_s : float
         Rolling-shutter readout time the track was corrected for (0: none).
+    intra : ndarray of bool or None
+        Frames the codec coded on their own (I-frames; every frame of
+        uncompressed video); None when unknown. ``fit_sine`` checks the
+        other frames' sine against theirs (the codec check).
     """
 
     video: str
@@ -196,6 +200,7 @@ class Track:
     angle_sigma_rad: np.ndarray | None = None
     angle_time_s: np.ndarray | None = None
     readout_s: float = 0.0
+    intra: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -270,6 +275,7 @@ class Track:
             "angle_sigma_rad": self.angle_sigma_rad,
             "led_level": self.led_level,
             "angle_time_s": self.angle_time_s,
+            **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
         }
 
     def to_pandas(self):
@@ -291,7 +297,7 @@ class Track:
             row = []
             for name in names[:-1]:
                 value = cols[name][i]
-                if name in ("frame", "valid"):
+                if name in ("frame", "valid", "intra"):
                     row.append(str(int(value)))
                 elif np.isnan(value):
                     row.append("")
@@ -678,6 +684,7 @@ def track_video(
     led_model = ColourModel.from_seed(led_spec) if led_spec is not None else None  # type: ignore[arg-type]
 
     times: list[float] = []
+    intra: list[bool] = []  # frames the codec coded on their own (I-frames)
     xy: dict[str, list[tuple[float, float]]] = {"lead": [], "trail": []}
     area: dict[str, list[float]] = {"lead": [], "trail": []}
     sigma: dict[str, list[float]] = {"lead": [], "trail": []}
@@ -694,7 +701,7 @@ def track_video(
 
     if engine != "reference-rgb":
         (snapshot, snapshot_index) = _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec,
-                                               led_model, progress, times, xy, area, sigma, reasons,
+                                               led_model, progress, times, intra, xy, area, sigma, reasons,
                                                led_signal, warnings, repeated, led_peak_dn)
     else:
         for frame in iter_frames(path, fields=fields):
@@ -729,6 +736,7 @@ def track_video(
                 found[tracker.name] = blob
                 reason = reason or blob.flaw
             times.append(frame.time_s)
+            intra.append(frame.intra)
             _record_markers(frame, found, xy, area, sigma)
             reasons.append(reason)
             if snapshot is None and not reason and frame.row_step == 1:
@@ -873,6 +881,7 @@ def track_video(
         angle_sigma_rad=angle_sigma,
         angle_time_s=angle_time,
         readout_s=float(settings.readout_s),
+        intra=np.asarray(intra, dtype=bool),
     )
 
 
@@ -1267,8 +1276,8 @@ def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Bl
     return _Blob(m, soft.sigma_px, tracker._flaw(soft))
 
 
-def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec, led_model, progress, times, xy,
-              area, sigma, reasons, led_signal, warnings, repeated, led_peak_dn):
+def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec, led_model, progress, times, intra,
+              xy, area, sigma, reasons, led_signal, warnings, repeated, led_peak_dn):
     """Per-frame loop of the YUV engines; fills the per-frame lists; returns (snapshot, snapshot_index)."""
     kernel = K.ENGINES[engine]
     led_kernel = K.LED_ENGINES[engine]
@@ -1375,6 +1384,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
             found[tracker.name] = blob
             reason = reason or blob.flaw
         times.append(frame.time_s)
+        intra.append(frame.intra)
         _record_markers(frame, found, xy, area, sigma)
         reasons.append(reason)
         if snapshot is None and not reason and frame.row_step == 1:

@@ -19,7 +19,7 @@ import control
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..video.writer import VideoWriter, container_suffixes
+from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
 from .scene import Scene, led_exposure_fraction, marker_angle_rad
@@ -295,7 +295,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
         "step": steps,
         "camera": camera.to_dict(),
         "video": {
-            "codec": p.codec, "bit_rate": p.bit_rate if p.codec == "h264" else None, "fps": float(fps),
+            "codec": p.codec, "bit_rate": p.bit_rate if p.codec in LOSSY else None, "fps": float(fps),
             "fps_rational": [fps.numerator, fps.denominator], "exposure_s": p.exposure_s,
             "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,
             # Only a rolling shutter is said: a global shutter's truth stays as it was.

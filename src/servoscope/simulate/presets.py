@@ -42,10 +42,10 @@ class CampaignPreset:
         Frame size, pixels (even).
     fps : float or Fraction
         Frame rate.
-    codec : {"h264", "raw"}
+    codec : {"h264", "mpeg2", "raw"}
         Video codec (see :class:`servoscope.video.writer.VideoWriter`).
     bit_rate : int
-        H.264 bit rate, bit/s.
+        H.264 or MPEG-2 bit rate, bit/s.
     x264_preset : str
         x264 speed preset.
     noise_sigma_dn : float

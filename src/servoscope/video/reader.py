@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import ServoscopeError
 
 __all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames",
-           "yuv_planes", "configure_decoder", "default_decoder_threads", "i420_of_planes"]
+           "yuv_planes", "is_intra", "configure_decoder", "default_decoder_threads", "i420_of_planes"]
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,9 @@ class Frame:
     row_offset, row_step : int
         Row ``j`` of ``rgb`` is row ``row_offset + row_step·j`` of the full
         frame: (0, 1) for whole frames, (0, 2) / (1, 2) for top / bottom fields.
+    intra : bool
+        The codec coded this frame on its own (an I-frame; every frame of
+        uncompressed or intra-only video), not as a change from other frames.
     """
 
     index: int
@@ -76,6 +79,7 @@ class Frame:
     rgb: np.ndarray
     row_offset: int = 0
     row_step: int = 1
+    intra: bool = True
 
     def to_frame_xy(self, xy_px: np.ndarray) -> np.ndarray:
         """Points in this image (px, shape (..., 2)) in full-frame coordinates."""
@@ -198,14 +202,15 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
                 rgb = frame.to_ndarray(format="rgb24")
+                intra = is_intra(frame)
                 if fields is None:
-                    yield Frame(index, time_s, rgb)
+                    yield Frame(index, time_s, rgb, intra=intra)
                     index += 1
                     continue
                 half = 0.5 / float(rate) if rate else 0.0
                 order = (0, 1) if fields == "tff" else (1, 0)
                 for k, parity in enumerate(order):
-                    yield Frame(index, time_s + k * half, np.ascontiguousarray(rgb[parity::2]), parity, 2)
+                    yield Frame(index, time_s + k * half, np.ascontiguousarray(rgb[parity::2]), parity, 2, intra)
                     index += 1
         except av.error.FFmpegError as exc:
             if index == 0:
@@ -237,6 +242,8 @@ class YuvFrame:
         kernel maps image row ``j`` to frame row ``row_offset + row_step·j``.
     luma : ndarray, shape (height, width), uint8
         The whole frame's luma plane (``y`` is ``luma`` or one field of it).
+    intra : bool
+        As :attr:`Frame.intra`.
     """
 
     index: int
@@ -247,6 +254,7 @@ class YuvFrame:
     luma: np.ndarray
     row_offset: int = 0
     row_step: int = 1
+    intra: bool = True
     _i420: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -338,6 +346,17 @@ def configure_decoder(stream, threads: int = 0) -> None:
     stream.codec_context.thread_count = threads or DECODER_THREADS or thread_budget() or default_decoder_threads()
 
 
+def is_intra(frame) -> bool:
+    """Whether a decoded frame was coded on its own (an I-frame or a key frame).
+
+    Such a frame's picture does not lean on other frames' motion
+    compensation, so a motion the codec smooths or holds back in the frames
+    predicted from others is where it is in this one (docs/accuracy.md,
+    "MPEG-2").
+    """
+    return bool(frame.key_frame) or int(frame.pict_type) == 1  # AV_PICTURE_TYPE_I
+
+
 def yuv_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A decoded frame's Y, U, V planes as uint8 views of its buffers (no copy).
 
@@ -385,7 +404,7 @@ def _decode_into(path: Path, q, stop, threads: int) -> None:
         try:
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
-                if not put((time_s, yuv_planes(frame), rate_hz)):
+                if not put((time_s, yuv_planes(frame), rate_hz, is_intra(frame))):
                     return
                 n += 1
         except av.error.FFmpegError as exc:
@@ -432,15 +451,15 @@ def iter_yuv_frames(path: str | Path, *, threads: int = 0, fields: str | None = 
                 return
             if isinstance(item, BaseException):
                 raise item
-            time_s, (y, u, v), rate = item
+            time_s, (y, u, v), rate, intra = item
             if fields is None:
-                yield YuvFrame(index, time_s, y, u, v, y)
+                yield YuvFrame(index, time_s, y, u, v, y, intra=intra)
                 index += 1
                 continue
             half = 0.5 / rate if rate else 0.0
             order = (0, 1) if fields == "tff" else (1, 0)
             for k, parity in enumerate(order):
-                yield YuvFrame(index, time_s + k * half, y[parity::2], u, v, y, parity, 2)
+                yield YuvFrame(index, time_s + k * half, y[parity::2], u, v, y, parity, 2, intra)
                 index += 1
     finally:
         stop.set()

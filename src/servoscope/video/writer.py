@@ -1,6 +1,6 @@
 """Write RGB frames to a video file with exact, frame-indexed timestamps.
 
-Two codecs:
+Three codecs:
 
 * ``"h264"``: libx264, yuv420p, constant *average* bit rate, in an MP4 (or
   MOV) container — what a camcorder records. The default 20 Mbit/s is a
@@ -11,6 +11,11 @@ Two codecs:
   under 3 s on one core; ``superfast`` alone takes ~11 ms per frame).
   The encoder runs single-threaded by default so that the same input gives
   the same bytes on every machine (x264's output depends on its thread count).
+* ``"mpeg2"``: MPEG-2 video (FFmpeg's ``mpeg2video``), yuv420p, in an MPEG
+  transport stream (``.ts``/``.m2t``, what HDV camcorders write) or program
+  stream (``.mpg``): the paper's camera's codec, at 25 Mbit/s there. A GOP
+  of 15 frames with 2 B-frames between references, as HDV's; a single
+  encoder thread, deterministic.
 * ``"raw"``: uncompressed yuv420p (``rawvideo``) in AVI or NUT; both carry
   the stream time base 1/fps exactly, so decoded ``frame.time == i / fps``.
   (Matroska is not offered: its millisecond time base cannot represent
@@ -32,10 +37,14 @@ from numba import njit
 
 from ..errors import ServoscopeError
 
-__all__ = ["VideoWriter", "CODECS", "container_suffixes", "rgb_to_yuv420p"]
+__all__ = ["VideoWriter", "CODECS", "LOSSY", "container_suffixes", "rgb_to_yuv420p"]
 
 #: Codec name → allowed file suffixes.
-CODECS: dict[str, tuple[str, ...]] = {"h264": (".mp4", ".mov"), "raw": (".avi", ".nut")}
+CODECS: dict[str, tuple[str, ...]] = {"h264": (".mp4", ".mov"), "mpeg2": (".ts", ".m2t", ".mpg"),
+                                      "raw": (".avi", ".nut")}
+
+#: Codecs with a bit rate (the others are lossless).
+LOSSY = ("h264", "mpeg2")
 
 
 def container_suffixes(codec: str) -> tuple[str, ...]:
@@ -120,15 +129,15 @@ class VideoWriter:
     ----------
     path : str or Path
         Output file; its suffix must suit the codec (``.mp4``/``.mov`` for
-        h264, ``.avi``/``.nut`` for raw).
+        h264, ``.ts``/``.m2t``/``.mpg`` for mpeg2, ``.avi``/``.nut`` for raw).
     width, height : int
         Frame size in pixels (even: yuv420p subsamples chroma 2×2).
     fps : float or Fraction
         Frame rate, e.g. ``100`` or ``Fraction(30000, 1001)``.
-    codec : {"h264", "raw"}
-        H.264 (libx264) or uncompressed yuv420p.
+    codec : {"h264", "mpeg2", "raw"}
+        H.264 (libx264), MPEG-2 (HDV's) or uncompressed yuv420p.
     bit_rate : int
-        H.264 average bit rate, bit/s (20 Mbit/s: a camcorder's rate; the
+        H.264 and MPEG-2 average bit rate, bit/s (20 Mbit/s: a camcorder's rate; the
         paper's HDV camera records 25 Mbit/s). Ignored for raw.
     preset : str
         x264 speed preset.
@@ -150,7 +159,7 @@ class VideoWriter:
             raise ServoscopeError(f"{self.path}: a {codec} video needs a file ending in {' or '.join(suffixes)}")
         if width <= 0 or height <= 0 or width % 2 or height % 2:
             raise ServoscopeError(f"video size {width}x{height}: width and height must be positive and even")
-        if codec == "h264" and not bit_rate > 0:
+        if codec in LOSSY and not bit_rate > 0:
             raise ServoscopeError(f"bit rate must be positive, not {bit_rate}")
         self.width, self.height = int(width), int(height)
         self.fps = _as_fraction(fps)
@@ -164,6 +173,11 @@ class VideoWriter:
                 stream = self._container.add_stream("libx264", rate=self.fps)
                 stream.bit_rate = self.bit_rate
                 stream.options = {"preset": preset}
+            elif codec == "mpeg2":
+                stream = self._container.add_stream("mpeg2video", rate=self.fps)
+                stream.bit_rate = self.bit_rate
+                stream.codec_context.gop_size = 15
+                stream.codec_context.max_b_frames = 2
             else:
                 stream = self._container.add_stream("rawvideo", rate=self.fps)
             stream.width = self.width
