@@ -107,12 +107,15 @@ def cli() -> None:
               help="Exposure time, s (preset's: one frame interval).")
 @click.option("--readout", "readout_s", type=click.FloatRange(min=0.0),
               help="Rolling-shutter readout time, s, < the frame interval (preset's: 0, a global shutter).")
+@click.option("--gop", type=click.IntRange(min=1),
+              help="Frames from one I-frame to the next (codec's default: 250 for h264, 15 for mpeg2).")
 def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: int | None, fps: float | None,
-             exposure_s: float | None, readout_s: float | None) -> None:
+             exposure_s: float | None, readout_s: float | None, gop: int | None) -> None:
     """Render a campaign with a known answer (the digital twin) into OUTDIR."""
     from .simulate import simulate_campaign
 
-    given = {"codec": codec, "bit_rate": bit_rate, "fps": fps, "exposure_s": exposure_s, "readout_s": readout_s}
+    given = {"codec": codec, "bit_rate": bit_rate, "fps": fps, "exposure_s": exposure_s, "readout_s": readout_s,
+             "gop": gop}
     if fps is not None and exposure_s is None:
         # The preset's exposure is one interval of its own frame rate; keep it one interval of this one.
         given["exposure_s"] = 1.0 / fps

@@ -168,7 +168,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                    "led_time_s": led_time.tolist()}
         rows = np.arange(preset.height, dtype=np.float64)
     with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
-                     preset=preset.x264_preset) as writer:
+                     preset=preset.x264_preset, gop=preset.gop) as writer:
         for i in range(n):
             if preset.readout_s > 0:
                 row_t = _row_time_s(time_s[i], rows, preset)
@@ -295,7 +295,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
         "step": steps,
         "camera": camera.to_dict(),
         "video": {
-            "codec": p.codec, "bit_rate": p.bit_rate if p.codec in LOSSY else None, "fps": float(fps),
+            "codec": p.codec, "bit_rate": p.bit_rate if p.codec in LOSSY else None, "gop": p.gop, "fps": float(fps),
             "fps_rational": [fps.numerator, fps.denominator], "exposure_s": p.exposure_s,
             "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,
             # Only a rolling shutter is said: a global shutter's truth stays as it was.

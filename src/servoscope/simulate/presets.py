@@ -46,6 +46,9 @@ class CampaignPreset:
         Video codec (see :class:`servoscope.video.writer.VideoWriter`).
     bit_rate : int
         H.264 or MPEG-2 bit rate, bit/s.
+    gop : int or None
+        Frames from one intra-coded frame to the next (None: the codec's
+        default, see :class:`servoscope.video.writer.VideoWriter`).
     x264_preset : str
         x264 speed preset.
     noise_sigma_dn : float
@@ -93,6 +96,7 @@ class CampaignPreset:
     codec: str = "h264"
     bit_rate: int = 20_000_000
     x264_preset: str = "ultrafast"
+    gop: int | None = None
     noise_sigma_dn: float = 1.5
     exposure_s: float | None = None
     readout_s: float = 0.0

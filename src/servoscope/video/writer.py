@@ -143,6 +143,10 @@ class VideoWriter:
         x264 speed preset.
     threads : int
         Encoder threads; 1 (default) makes the bytes machine-independent.
+    gop : int, optional
+        Frames from one intra-coded frame to the next (the GOP length):
+        default x264's 250 for h264 and HDV's 15 for mpeg2; camcorders'
+        AVCHD uses 12–15 at 25/30 frames/s.
 
     Examples
     --------
@@ -152,13 +156,15 @@ class VideoWriter:
 
     def __init__(self, path: str | Path, width: int, height: int, fps: float | Fraction, *,
                  codec: str = "h264", bit_rate: int = 20_000_000, preset: str = "ultrafast",
-                 threads: int = 1) -> None:
+                 threads: int = 1, gop: int | None = None) -> None:
         self.path = Path(path)
         suffixes = container_suffixes(codec)
         if self.path.suffix.lower() not in suffixes:
             raise ServoscopeError(f"{self.path}: a {codec} video needs a file ending in {' or '.join(suffixes)}")
         if width <= 0 or height <= 0 or width % 2 or height % 2:
             raise ServoscopeError(f"video size {width}x{height}: width and height must be positive and even")
+        if gop is not None and not int(gop) >= 1:
+            raise ServoscopeError(f"GOP must be at least 1 frame, not {gop}")
         if codec in LOSSY and not bit_rate > 0:
             raise ServoscopeError(f"bit rate must be positive, not {bit_rate}")
         self.width, self.height = int(width), int(height)
@@ -173,10 +179,12 @@ class VideoWriter:
                 stream = self._container.add_stream("libx264", rate=self.fps)
                 stream.bit_rate = self.bit_rate
                 stream.options = {"preset": preset}
+                if gop is not None:
+                    stream.codec_context.gop_size = int(gop)  # x264's keyint
             elif codec == "mpeg2":
                 stream = self._container.add_stream("mpeg2video", rate=self.fps)
                 stream.bit_rate = self.bit_rate
-                stream.codec_context.gop_size = 15
+                stream.codec_context.gop_size = 15 if gop is None else int(gop)
                 stream.codec_context.max_b_frames = 2
             else:
                 stream = self._container.add_stream("rawvideo", rate=self.fps)
