@@ -108,7 +108,7 @@ def test_campaign_files_are_readable_and_consistent(quick):
 
     assert truth["preset"] == "quick" and truth["seed"] == 7
     assert truth["model"]["num"] == list(PAPER_SERVO.num) and truth["model"]["dead_time_s"] == 0.085
-    assert truth["video"] == {"codec": "h264", "bit_rate": 20_000_000, "fps": 100.0, "fps_rational": [100, 1],
+    assert truth["video"] == {"codec": "h264", "bit_rate": 20_000_000, "gop": None, "fps": 100.0, "fps_rational": [100, 1],
                               "exposure_s": 0.01, "noise_sigma_dn": 1.5, "width": 360, "height": 288}
     # step metrics of 0.23*37^2/(s^2 + 2*0.65*37 s + 37^2), closed forms / python-control
     z = 0.65
