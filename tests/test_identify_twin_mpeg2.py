@@ -64,3 +64,14 @@ def test_mpeg2_model_within_the_accuracy_targets(mpeg2_campaign, result, truth, 
     assert model.params["gain"] == pytest.approx(truth["gain"], rel=0.003)
     assert model.params["natural_frequency_rad_s"] == pytest.approx(truth["natural_frequency_rad_s"], rel=0.01)
     assert model.params["damping_ratio"] == pytest.approx(truth["damping_ratio"], rel=0.03)
+
+
+def test_report_shows_the_codec_check(result, tmp_path):
+    paths = result.write(tmp_path)
+    html = paths["report"].read_text()
+    # The fast dwell's row: its flag whole, and what the other frames did against its I-frames.
+    row = html[html.index("<td>dwell_08_15.00Hz</td><td>15</td>"):]
+    row = row[: row.index("</tr>")]
+    assert "<td>codec</td>" in row
+    top = result.sine_fits["dwell_08_15.00Hz"]
+    assert f"({top.n_intra} I-frames)" in row and row.count(" % ± ") == 1

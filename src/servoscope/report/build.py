@@ -75,6 +75,15 @@ def model_equation(model, dead_time_s: float | None) -> str:
     return f"G(s) = ({_poly_text(model.num)}) / ({_poly_text(model.den)}) · e^(−sτ), τ = {tau}"
 
 
+def _codec_cell(fit) -> str:
+    """The codec check of one dwell, for the report's dwell table."""
+    if fit is None or fit.codec_gain_bias is None:
+        return "—" if fit is None or not fit.n_intra else f"not checked ({fit.n_intra} I-frames)"
+    bias, err = format_with_uncertainty(100.0 * fit.codec_gain_bias, 100.0 * fit.codec_gain_bias_stderr)
+    used = "" if fit.estimator == "intra frames" else "; all frames used"
+    return f"{bias} % ± {err} % ({fit.n_intra} I-frames{used})"
+
+
 def dead_time_stderr_s(result: "IdentificationResult") -> float | None:
     """Standard error of ``result.dead_time_s``: the step test's fit, else the dwells' phases."""
     if result.dead_time_source == "step test" and result.step is not None:
@@ -180,16 +189,24 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
     dwell_rows = []
-    for r in fr.summary():
+    fits_in_order = [result.sine_fits.get(label) for label in fr.labels]
+    checked = any(f is not None and f.codec_gain_bias is not None for f in fits_in_order)
+    for r, sine_fit in zip(fr.summary(), fits_in_order):
         gain, gain_se = format_with_uncertainty(r["gain"], r.get("gain_stderr"))
         phase, phase_se = format_with_uncertainty(r["phase_deg"], r.get("phase_stderr_deg"))
         gain_db_se = None if r.get("gain_stderr") is None else 20.0 / math.log(10.0) * r["gain_stderr"] / r["gain"]
         gain_db = format_with_uncertainty(r["gain_db"], gain_db_se)[0]
-        dwell_rows.append([r["video"], format_value(r["frequency_hz"], 4), gain, gain_se, gain_db, phase, phase_se,
-                           format_value(r["fidelity"], 5), format_value(r.get("thd"), 2),
-                           ", ".join(r.get("flags") or []) or "—"])
-    s.table(["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"],
-            dwell_rows)
+        row = [r["video"], format_value(r["frequency_hz"], 4), gain, gain_se, gain_db, phase, phase_se,
+               format_value(r["fidelity"], 5), format_value(r.get("thd"), 2), ", ".join((r.get("flags") or "").split()) or "—"]
+        if checked:
+            row.append(_codec_cell(sine_fit))
+        dwell_rows.append(row)
+    s.table(["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"]
+            + (["codec: other frames against the I-frames"] if checked else []), dwell_rows)
+    if checked:
+        s.text("Where a dwell has enough I-frames (frames the codec coded on their own), its gain and phase are "
+               "fitted to them alone: the codec's motion prediction cannot hold the sticker back there. The last "
+               "column is how much the other frames' amplitude differs (docs/accuracy.md, \"The codec check\").")
     sections.append(s)
 
     label = _representative_dwell(result)
