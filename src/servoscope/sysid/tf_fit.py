@@ -128,8 +128,6 @@ __all__ = [
 
 _DB_PER_NEPER = 20.0 / math.log(10.0)
 _SIGMA_FLOOR = 1e-3
-#: Scale the covariance by max(1, chi2/dof) (True) or by chi2/dof (nlinfit).
-_BIRGE = True
 #: CIFER's phase weight W_p (per deg**2, with W_g = 1 per dB**2).
 CIFER_PHASE_WEIGHT = 0.01745
 #: CIFER's thresholds on J.
@@ -866,6 +864,47 @@ def _check_order(order: Any) -> tuple[int, int]:
     return nb, na
 
 
+def _canonical_in_bounds(st: Structure, d: _Data, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """An optimizer's solution in canonical form, clamped to the bounds of ``d``'s band (every fit's result is)."""
+    lo_c, hi_c = st.clamp_limits(float(d.w[0]), float(d.w[-1]))
+    return np.clip(st.canonical(x), lo_c, hi_c)
+
+
+def _ci95(names: Sequence[str], vals: NDArray[np.float64], se: NDArray[np.float64],
+          dof: int) -> dict[str, tuple[float, float]]:
+    """``value ± t(0.975, dof)·stderr`` per parameter (as nlparci)."""
+    tq = float(student_t.ppf(0.975, dof)) if dof > 0 else float("nan")
+    return {n: (float(v - tq * e), float(v + tq * e)) for n, v, e in zip(names, vals, se)}
+
+
+def _stderr_fields(st: Structure, stderr: dict[str, float]) -> dict[str, float | None]:
+    """The TransferFunctionFit attributes that repeat ``stderr``'s entries by name (None where absent)."""
+    second = st.na == 2
+    return {
+        "gain_stderr": stderr["gain"],
+        "natural_frequency_stderr_rad_s": stderr["natural_frequency_rad_s"] if second else None,
+        "damping_ratio_stderr": stderr["damping_ratio"] if second else None,
+        "dead_time_stderr_s": stderr["dead_time_s"] if st.delay else None,
+    }
+
+
+def _refit(fit: TransferFunctionFit, d: _Data, sub: _Data) -> NDArray[np.float64] | None:
+    """Physical parameters of ``fit``'s model refitted to the dwells ``sub`` from its estimate.
+
+    Clamped to the bounds of the full data ``d``'s band, as the fit itself was
+    (a refit that runs off towards a bound gives the bound, never an
+    overflow); None when ``sub`` cannot determine the model or the refit fails.
+    """
+    st = fit._structure
+    assert st is not None and fit._theta is not None
+    if _identifiability_problem(sub, st, fit.mode) is not None:
+        return None
+    sol = _local(st, sub, np.asarray(fit._theta), fit.mode == "complex")
+    if not np.all(np.isfinite(sol.x)):
+        return None
+    return st.physical(_canonical_in_bounds(st, d, sol.x))[0]
+
+
 def _build(
     st: Structure,
     d: _Data,
@@ -876,8 +915,7 @@ def _build(
 ) -> TransferFunctionFit:
     """Turn an optimizer solution into a TransferFunctionFit (covariance, CI, J, AIC/BIC)."""
     use_phase = mode == "complex"
-    lo_c, hi_c = st.clamp_limits(float(d.w[0]), float(d.w[-1]))
-    theta = np.clip(st.canonical(sol.x), lo_c, hi_c)
+    theta = _canonical_in_bounds(st, d, sol.x)
     r = _resid(st, d, theta, use_phase)
     J = _jac(st, d, theta, use_phase)
     m, p = r.size, theta.size
@@ -894,7 +932,7 @@ def _build(
     if dof > 0:
         # Stated errors are trusted unless the misfit says they are too
         # small; without any, the scatter alone sets the scale (nlinfit).
-        cov_int = cov_int * (max(1.0, chi2 / dof) if _BIRGE and d.stated else chi2 / dof)
+        cov_int = cov_int * (max(1.0, chi2 / dof) if d.stated else chi2 / dof)
     else:
         cov_int = np.full_like(cov_int, np.nan)
         warns.append("no degrees of freedom left: standard errors unavailable")
@@ -905,8 +943,7 @@ def _build(
     names = st.names()
     params = {n: float(v) for n, v in zip(names, vals)}
     stderr = {n: float(s) for n, s in zip(names, se)}
-    tq = float(student_t.ppf(0.975, dof)) if dof > 0 else float("nan")
-    ci95 = {n: (float(v - tq * s), float(v + tq * s)) for n, v, s in zip(names, vals, se)}
+    ci95 = _ci95(names, vals, se, dof)
 
     # Parameters outside the data or not determined by them.
     undetermined: list[str] = []
@@ -964,11 +1001,8 @@ def _build(
         gain=params["gain"],
         natural_frequency_rad_s=params["natural_frequency_rad_s"] if second else None,
         damping_ratio=params["damping_ratio"] if second else None,
-        gain_stderr=stderr["gain"],
-        natural_frequency_stderr_rad_s=stderr["natural_frequency_rad_s"] if second else None,
-        damping_ratio_stderr=stderr["damping_ratio"] if second else None,
         dead_time_s=tau,
-        dead_time_stderr_s=stderr["dead_time_s"] if st.delay else None,
+        **_stderr_fields(st, stderr),
         covariance=_readonly(cov),
         residual_rms_db=float(np.sqrt(np.mean(res_db**2))),
         residual_rms_deg=res_deg,
@@ -1008,18 +1042,11 @@ def _with_jackknife(fit: TransferFunctionFit, d: _Data) -> TransferFunctionFit:
     se = np.array([fit.stderr_jacobian.get(n, fit.stderr[n]) for n in names])
     if not np.all(np.isfinite(se) & (se > 0)):
         return fit
-    use_phase = fit.mode == "complex"
-    # The same bounds as the full fit's (_build): a delete-one fit that runs off to a bound or
-    # beyond gives the bound, never an overflow.
-    lo_c, hi_c = st.clamp_limits(float(d.w[0]), float(d.w[-1]))
     rows = np.full((d.n, st.n_params), np.nan)
     for i in range(d.n):
-        sub = d.take(np.delete(np.arange(d.n), i))
-        if _identifiability_problem(sub, st, fit.mode) is not None:
-            continue
-        sol = _local(st, sub, np.asarray(fit._theta), use_phase)
-        if np.all(np.isfinite(sol.x)):
-            rows[i] = st.physical(np.clip(st.canonical(sol.x), lo_c, hi_c))[0]
+        row = _refit(fit, d, d.take(np.delete(np.arange(d.n), i)))
+        if row is not None:
+            rows[i] = row
     ok = np.all(np.isfinite(rows), axis=1)
     m = int(ok.sum())
     if m < 3:
@@ -1029,39 +1056,31 @@ def _with_jackknife(fit: TransferFunctionFit, d: _Data) -> TransferFunctionFit:
     se_new = np.maximum(se, se_jack)
     scale = se_new / se
     cov = np.asarray(fit.covariance) * scale[:, None] * scale[None, :]
-    dof = fit.n_residuals - fit.n_params
-    tq = float(student_t.ppf(0.975, dof)) if dof > 0 else float("nan")
     vals = np.array([fit.params[n] for n in names])
     stderr = {n: float(v) for n, v in zip(names, se_new)}
     labels = [lab for lab, good in zip(d.labels, ok) if good]
     influence = {}
-    for k, name in enumerate(names):
-        i = int(np.argmax(np.abs(kept[:, k] - vals[k])))
-        influence[name] = {"dwell": labels[i], "without": float(kept[i, k]),
-                           "shift_stderr": float((kept[i, k] - vals[k]) / se_new[k])}
     warns = []
     for k, name in enumerate(names):
+        i = int(np.argmax(np.abs(kept[:, k] - vals[k])))
+        inf = influence[name] = {"dwell": labels[i], "without": float(kept[i, k]),
+                                 "shift_stderr": float((kept[i, k] - vals[k]) / se_new[k])}
         if se_jack[k] > _RESTS_ON_ONE * se[k]:
-            inf = influence[name]
             warns.append(
                 f"{_words(name)} rests on {inf['dwell']} more than the dwells' stated errors allow (without it: "
                 f"{inf['without']:.5g}); its interval was widened {se_jack[k] / se[k]:.1f}x by leaving each dwell "
                 "out in turn. A systematic error in that dwell? (video compression of very small motions, a "
                 "resonance the model lacks)"
             )
-    second = st.na == 2
     return replace(
         fit,
         warnings=tuple(dict.fromkeys(fit.warnings + tuple(warns))),
         covariance=_readonly(cov),
         stderr=stderr,
-        ci95={n: (float(v - tq * e), float(v + tq * e)) for n, v, e in zip(names, vals, se_new)},
+        ci95=_ci95(names, vals, se_new, fit.n_residuals - fit.n_params),
         stderr_jackknife={n: float(v) for n, v in zip(names, se_jack)},
         influence=influence,
-        gain_stderr=stderr["gain"],
-        natural_frequency_stderr_rad_s=stderr["natural_frequency_rad_s"] if second else None,
-        damping_ratio_stderr=stderr["damping_ratio"] if second else None,
-        dead_time_stderr_s=stderr["dead_time_s"] if st.delay else None,
+        **_stderr_fields(st, stderr),
     )
 
 
@@ -1071,7 +1090,6 @@ def _bootstrap(
     """Resample the dwells with replacement, refit from the estimate, percentile intervals."""
     st = fit._structure
     assert st is not None and fit._theta is not None
-    use_phase = fit.mode == "complex"
     rng = np.random.default_rng(seed)
     rows = []
     skipped = 0
@@ -1079,15 +1097,11 @@ def _bootstrap(
     n = d.n
     while len(rows) < n_boot and attempts < 10 * n_boot:
         attempts += 1
-        sub = d.take(np.sort(rng.integers(0, n, n)))
-        if _identifiability_problem(sub, st, fit.mode) is not None:
+        row = _refit(fit, d, d.take(np.sort(rng.integers(0, n, n))))
+        if row is None:
             skipped += 1
             continue
-        sol = _local(st, sub, np.asarray(fit._theta), use_phase)
-        if not np.all(np.isfinite(sol.x)):
-            skipped += 1
-            continue
-        rows.append(st.physical(st.canonical(sol.x))[0])
+        rows.append(row)
     warns = []
     if skipped:
         warns.append(f"bootstrap: {skipped} resample(s) could not determine the model and were redrawn")
