@@ -254,9 +254,11 @@ def _gpu_rate(path: Path, batch: int = 64) -> float | None:
 
 
 def _decoder_thread_counts() -> list[int]:
-    """Thread counts tried for the fastest decode-only rate."""
+    """Thread counts tried for the fastest decode-only rate (the tracker's own count among them)."""
+    from .video.reader import default_decoder_threads
+
     cores = os.cpu_count() or 1
-    return sorted({1, 2, cores, cores + 1, 2 * cores, min(16, 3 * cores)})
+    return sorted({1, 2, cores, cores + 1, 2 * cores, default_decoder_threads()})
 
 
 def _timed(fn, *args, repeat: int = 1) -> tuple[float, int]:

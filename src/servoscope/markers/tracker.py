@@ -351,30 +351,17 @@ class _MarkerTracker:
         """Whether a centroid has been accepted yet."""
         return self._last is not None
 
-    @property
-    def last_xy(self) -> np.ndarray | None:
-        """The last accepted centroid (px), None before the first."""
-        return None if self._last is None else np.array(self._last)
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """Smoothed centroid motion per frame (px)."""
-        return np.array(self._velocity)
-
     def predicted_xy(self) -> tuple[float, float] | None:
         """Where the marker should be in this frame (px): last position plus velocity."""
         if self._last is None:
             return None
         return self._last[0] + self._velocity[0], self._last[1] + self._velocity[1]
 
-    def predicted(self) -> np.ndarray | None:
-        p = self.predicted_xy()
-        return None if p is None else np.array(p)
-
     def find(self, rgb: np.ndarray) -> tuple[_Blob | None, str]:
         """The marker's blob in this frame, or None and why not."""
         h, w = rgb.shape[:2]
-        predicted = self.predicted()
+        p = self.predicted_xy()
+        predicted = None if p is None else np.array(p)
         windows = []
         if predicted is not None:
             r = self.search_radius_px + self.extent_px

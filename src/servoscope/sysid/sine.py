@@ -1016,15 +1016,14 @@ def _codec_check(intra: ArrayLike | None, t_all: NDArray[np.float64], y_all: NDA
         return out
     coef, *_ = np.linalg.lstsq(X, yi, rcond=None)
     r = yi - X @ coef
-    try:
-        cov = np.linalg.inv(X.T @ X) * (float(r @ r) / (n_i - 3))
-    except np.linalg.LinAlgError:
-        return out
     if _HAC:
         # Errors that depend on where the sticker sits on the pixel grid change slowly on slow
         # dwells: correlated from one intra frame to the next too.
         order = np.argsort(ti, kind="stable")
         cov = hac_covariance(X[order], r[order])
+    else:
+        # X is well conditioned here (checked above).
+        cov = np.linalg.inv(X.T @ X) * (float(r @ r) / (n_i - 3))
     a, b = float(coef[1]), float(coef[2])
     amp_i = math.hypot(a, b)
     if not amp_i > 0:

@@ -352,7 +352,7 @@ def is_intra(frame) -> bool:
     Such a frame's picture does not lean on other frames' motion
     compensation, so a motion the codec smooths or holds back in the frames
     predicted from others is where it is in this one (docs/accuracy.md,
-    "MPEG-2").
+    "The codec check").
     """
     return bool(frame.key_frame) or int(frame.pict_type) == 1  # AV_PICTURE_TYPE_I
 
