@@ -4,7 +4,7 @@ import json
 
 from click.testing import CliRunner
 
-from servoscope.bench import _decoder_thread_counts, bench
+from servoscope.bench import BENCH_CLIPS, TARGETS, _decoder_thread_counts, bench, check_targets
 
 
 def test_bench_json_on_tiny_clips(tmp_path):
@@ -12,7 +12,7 @@ def test_bench_json_on_tiny_clips(tmp_path):
                                      "--workers", "1"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output.strip().splitlines()[-1])
-    for codec in ("raw", "h264"):
+    for codec in ("raw", "h264", "h264_100fps"):
         row = out["clips"][codec]
         assert row["decode_fps"] > 0 and row["track_fps"] > 0 and row["opencv_fps"] > 0
         assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
@@ -38,12 +38,16 @@ def test_bench_whole_commands_and_one_core_runs(tmp_path):
                                      "--workers", "2", "--whole"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output.strip().splitlines()[-1])
-    for codec in ("raw", "h264"):
+    for codec in ("raw", "h264", "h264_100fps"):
         row = out["whole"][codec]
         assert row["track_s"] > 0 and row["opencv_s"] > 0 and row["decode_s"] > 0
         assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
     par = out["parallel"]
     assert par["one_core_fps"] > 0 and par["parallel_one_thread_fps"] > 0 and par["speedup_over_one_core"] > 0
+    # Every target of the issue is measured by this run and judged against its threshold.
+    assert [t["what"] for t in out["targets"]] == [what for what, _, _ in TARGETS]
+    for t in out["targets"]:
+        assert t["met"] == (t["measured"] >= t["target"])
     # The baseline scripts live in a temporary folder that is gone afterwards.
     assert not any(p.is_dir() for p in tmp_path.iterdir())
 
@@ -55,3 +59,33 @@ def test_decode_only_matches_the_tracker_reader(tmp_path):
     clips = render_bench_clips(tmp_path, 4, 160, 128)
     for path in clips.values():
         assert decode_only(path) == sum(1 for _ in iter_yuv_frames(path)) == 4
+
+
+def test_targets_judge_what_was_measured():
+    result = {"clips": {"raw": {"track_over_opencv": 10.0}, "h264": {"track_over_best_decode": 0.899}},
+              "parallel": {"speedup_over_one_core": 1.75}}
+    rows = {t["what"]: t for t in check_targets(result)}
+    # Only what the run measured is judged (no whole commands here); a ratio at the threshold meets it.
+    assert len(rows) == 3
+    assert rows["raw, tracking / OpenCV, in-process"]["met"] is True
+    assert rows["H.264 (camcorder), tracking / fastest decoding, in-process"]["met"] is False
+    assert rows["several videos, 2 processes / one core"]["measured"] == 1.75
+
+
+def test_bench_clips_are_what_they_say(tmp_path):
+    import av
+
+    from servoscope.bench import render_bench_clips
+
+    clips = render_bench_clips(tmp_path, 4, 160, 128)
+    assert set(clips) == set(BENCH_CLIPS)
+    for key, path in clips.items():
+        codec, fps, preset, _ = BENCH_CLIPS[key]
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            assert float(stream.average_rate) == fps
+            assert stream.codec_context.name == {"raw": "rawvideo", "h264": "h264"}[codec]
+            if codec == "h264":
+                # x264's settings travel in the stream's SEI text: the camcorder clip is CABAC-coded.
+                first = bytes(next(container.demux(stream)))
+                assert (b"cabac=1" in first) == (preset != "ultrafast")

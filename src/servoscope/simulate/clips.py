@@ -54,7 +54,8 @@ class Occluder:
 def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: float | Fraction = 100,
                 led_level: np.ndarray | None = None, camera: CameraModel | None = None, codec: str = "h264",
                 bit_rate: int = 20_000_000, noise_sigma_dn: float = 1.5, noise_seed: int = 0,
-                occluder: Occluder | None = None, duplicate_frames: tuple[int, ...] = ()) -> dict:
+                occluder: Occluder | None = None, duplicate_frames: tuple[int, ...] = (),
+                preset: str = "ultrafast", gop: int | None = None) -> dict:
     """Render and encode one clip; return its truth.
 
     Parameters
@@ -80,6 +81,9 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
     duplicate_frames : tuple of int
         Frames whose image is replaced by the previous frame's (their truth
         stays that of the previous image).
+    preset, gop : str, int or None
+        x264 speed preset and GOP length, as
+        :class:`~servoscope.video.writer.VideoWriter`.
 
     Returns
     -------
@@ -97,7 +101,8 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
     hidden = {"lead": np.zeros(n), "trail": np.zeros(n)}
     occ_rgb = colour_rgb(occluder.colour) if occluder is not None else None
     prev = None
-    with VideoWriter(path, scene.width, scene.height, fps, codec=codec, bit_rate=bit_rate) as writer:
+    with VideoWriter(path, scene.width, scene.height, fps, codec=codec, bit_rate=bit_rate, preset=preset,
+                     gop=gop) as writer:
         for i in range(n):
             if i in duplicate_frames and prev is not None:
                 writer.write(prev)
