@@ -45,7 +45,8 @@ def test_bench_whole_commands_and_one_core_runs(tmp_path):
     par = out["parallel"]
     assert par["one_core_fps"] > 0 and par["parallel_one_thread_fps"] > 0 and par["speedup_over_one_core"] > 0
     # Every target of the issue is measured by this run and judged against its threshold.
-    assert [t["what"] for t in out["targets"]] == [what for what, _, _ in TARGETS]
+    gpu_measured = "resident_fps" in out["gpu"]
+    assert [t["what"] for t in out["targets"]] == [what for what, keys, _ in TARGETS if gpu_measured or keys[0] != "gpu"]
     for t in out["targets"]:
         assert t["met"] == (t["measured"] >= t["target"])
     # The baseline scripts live in a temporary folder that is gone afterwards.

@@ -1282,9 +1282,9 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
     prev = None
     learned = False
     if settings.backend == "cuda":
-        from .gpu import GpuClassifier
+        from .gpu import require_cuda
 
-        GpuClassifier()  # raises without a CUDA GPU; the per-window work stays on the CPU (see gpu.py)
+        require_cuda()  # the per-window sub-pixel work stays on the CPU (see gpu.py)
 
     def measure_one(k: int, frame, window, centre=None) -> _Blob | None:
         one = np.zeros((2, K.NP))

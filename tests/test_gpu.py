@@ -1,0 +1,142 @@
+"""The GPU pass (markers/gpu.py): its class tables, its sums in numba's CUDA simulator, its PTX for an H100.
+
+No GPU is needed: the simulator runs the kernel's Python on the CPU (slow, so
+the frames are small), and NVIDIA's NVVM (the ``nvidia-cuda-nvcc-cu12``
+wheel) compiles it to the PTX a GPU would run.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from servoscope.markers import kernels as K
+
+TESTS = str(Path(__file__).parent)
+
+
+def _run(code: str, **env: str) -> str:
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(os.environ, **env),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    return res.stdout
+
+
+def test_class_tables_are_the_cpu_classifier_bit_for_bit():
+    sys.path.insert(0, TESTS)
+    from test_kernels import _frame, _params
+
+    from servoscope.markers import gpu
+
+    params = _params(_frame(0))
+    tables = gpu.class_tables(params)
+    assert tables.shape == (2, gpu.TABLE_WORDS) and tables.dtype == np.uint32
+    u, v = np.meshgrid(np.arange(256), np.arange(256), indexing="ij")
+    u, v = u.ravel(), v.ravel()
+    # Unpacked the way the kernel reads it: word (u·256 + v) >> 5, bit (u·256 + v) & 31.
+    idx = u * 256 + v
+    for k in range(2):
+        bits = (tables[k, idx >> 5] >> (idx & 31).astype(np.uint32)) & 1
+        want = K._classify_np(params[k], u.astype(float), v.astype(float))
+        np.testing.assert_array_equal(bits.astype(bool), want)
+        assert 0 < want.sum() < want.size  # a real class: neither empty nor everything
+    # The red and the green marker's classes do not overlap.
+    assert not np.any(tables[0] & tables[1])
+
+
+_SIMULATED = """
+    import sys
+    import numpy as np
+    sys.path.insert(0, {tests!r})
+    from test_kernels import _frame, _params
+    from servoscope.markers import TrackerSettings, gpu
+    from servoscope.markers import kernels as K
+    assert gpu.cuda_available()
+    frames = np.stack([_frame(s) for s in range(3)])
+    h, w = 96, 128
+    params = _params(frames[0])
+    whole = gpu.bench_params(TrackerSettings("#d62728", "#2ca02c"), w, h)[:1]    # red, the whole frame
+    outside = params[1].copy()
+    outside[[K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (100, 70, 400, 300)              # runs past the frame's corner
+    params = np.vstack([params, whole, outside])
+    classifier = gpu.GpuClassifier(params, h, w)
+    cpu = gpu.class_moments_cpu(frames, params)
+    sim = classifier.class_moments(frames)
+    assert cpu[:, :3, 0].min() > 0, cpu
+    np.testing.assert_array_equal(sim, cpu)
+    # Streamed from host memory in batches of 2 (the last one short), on two streams: the same sums.
+    rates = gpu.measure_rates(classifier, classifier.chroma_of(frames), batch=2, resident_passes=1)
+    np.testing.assert_array_equal(gpu.moments_from_sums(rates["sums"]), cpu)
+    assert rates["bytes_per_frame"] == h * w // 2 and min(rates[k] for k in ("resident_fps", "host_fps", "copy_fps")) > 0
+    # A window wholly outside the frame: nothing to do, zero sums.
+    empty = params[:1].copy()
+    empty[0, [K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (300, 300, 400, 400)
+    assert not gpu.GpuClassifier(empty, h, w).class_moments(frames).any()
+    print("ok")
+"""
+
+
+def test_gpu_sums_equal_the_cpu_reference_in_the_simulator():
+    assert _run(_SIMULATED.format(tests=TESTS), NUMBA_ENABLE_CUDASIM="1").startswith("ok")
+
+
+def test_gpu_classifier_needs_a_gpu():
+    from servoscope.errors import ServoscopeError
+    from servoscope.markers import gpu
+
+    if gpu.cuda_available():
+        pytest.skip("a CUDA GPU is present")
+    with pytest.raises(ServoscopeError, match="no CUDA GPU"):
+        gpu.GpuClassifier(np.zeros((1, K.NP)), 64, 64)
+
+
+_PTX = """
+    from numba import cuda, types
+    from servoscope.markers import gpu
+    assert gpu.NVVM_WHEEL, "the nvidia-cuda-nvcc-cu12 wheel was not found"
+    a = lambda dtype, ndim: types.Array(dtype, ndim, "C")
+    sig = (a(types.uint8, 2), types.int64, types.int64, types.int64, a(types.uint32, 2), a(types.int64, 2),
+           a(types.int64, 1), a(types.int64, 3))
+    ptx, _ = cuda.compile_ptx(gpu._class_sums.py_func, sig, cc=(9, 0))
+    print(ptx)
+"""
+
+
+def test_gpu_kernel_compiles_to_ptx_for_an_h100():
+    env = {k: v for k, v in os.environ.items() if k not in ("CUDA_HOME", "CUDA_PATH", "NUMBA_ENABLE_CUDASIM")}
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(_PTX)], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    ptx = res.stdout
+    assert ".target sm_90" in ptx
+    # The class tables and the tree reduction live in shared memory; each block adds its totals atomically,
+    # in 64-bit integers (exact, whatever the order).
+    assert "ld.shared.u32" in ptx and "bar.sync" in ptx
+    assert "atom.global.add.u64" in ptx
+    assert ".f64" not in ptx  # no floating point in the pass at all
+
+
+_BENCH = """
+    import sys
+    from pathlib import Path
+    from servoscope.bench import check_targets, gpu_bench, render_bench_clips
+    clip = render_bench_clips(Path({tmp!r}), 3, 64, 48)["raw"]
+    out = gpu_bench(clip, frames=3, check_frames=2, batch=2)
+    assert out["simulator"] is True and out["frames"] == 3 and out["checked_frames"] == 2, out
+    assert out["sums_equal_cpu"] is True, out
+    assert out["bytes_per_frame"] == 64 * 48 // 2
+    judged = [t["what"] for t in check_targets({{"gpu": out}})]
+    assert judged == ["GPU, frames in GPU memory / 1,000,000 frames/s", "GPU, frames from host memory / copying them alone"]
+    print("ok")
+"""
+
+
+def test_bench_gpu_path_runs_whole_in_the_simulator(tmp_path):
+    # What `servoscope bench` runs on a GPU: decode, stream, check against the CPU. Its rates here are not timings.
+    assert _run(_BENCH.format(tmp=str(tmp_path)), NUMBA_ENABLE_CUDASIM="1").startswith("ok")
