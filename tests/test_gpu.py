@@ -127,7 +127,7 @@ _BENCH = """
     from pathlib import Path
     from servoscope.bench import check_targets, gpu_bench, render_bench_clips
     clip = render_bench_clips(Path({tmp!r}), 3, 64, 48)["raw"]
-    out = gpu_bench(clip, frames=3, check_frames=2, batch=2)
+    out = gpu_bench(clip, frames=3, check_frames=2, batch=2, resident_passes=1)
     assert out["simulator"] is True and out["frames"] == 3 and out["checked_frames"] == 2, out
     assert out["sums_equal_cpu"] is True, out
     assert out["bytes_per_frame"] == 64 * 48 // 2

@@ -245,7 +245,7 @@ def whole_commands(clips: dict[str, Path], workdir: Path, repeat: int = 1, echo=
     return result
 
 
-def gpu_bench(path: Path, frames: int, check_frames: int = 16, batch: int = 256) -> dict:
+def gpu_bench(path: Path, frames: int, check_frames: int = 16, batch: int = 256, resident_passes: int = 20) -> dict:
     """The GPU pass (:mod:`servoscope.markers.gpu`) on up to ``frames`` frames of ``path``; a dict.
 
     The frames are decoded first and held in host memory (their chroma, all
@@ -277,7 +277,7 @@ def gpu_bench(path: Path, frames: int, check_frames: int = 16, batch: int = 256)
         chroma.append(classifier.chroma_of(frame.i420[None])[0])
         if len(chroma) == frames:
             break
-    rates = gpu.measure_rates(classifier, np.stack(chroma), batch=batch)
+    rates = gpu.measure_rates(classifier, np.stack(chroma), batch=batch, resident_passes=resident_passes)
     sums = rates.pop("sums")[:len(check)]
     rates["sums_equal_cpu"] = bool(np.array_equal(gpu.moments_from_sums(sums),
                                                   gpu.class_moments_cpu(np.stack(check), params)))

@@ -44,7 +44,7 @@ __all__ = ["cuda_available", "require_cuda", "class_tables", "chroma_windows", "
            "NVVM_WHEEL"]
 
 #: Threads per block (a power of two, for the tree reduction), laid across a chroma row.
-THREADS = 256
+THREADS = 128
 #: Chroma rows per block.
 ROWS_PER_BLOCK = 16
 #: Markers one pass can classify (their tables share the block's shared memory: 8 kB each).
