@@ -282,6 +282,9 @@ def test_sigint_mid_dwell_returns_to_centre(maestro, tmp_path):
             timers.append(timer)
             timer.start()
 
+    # A process started in the background by a non-interactive shell inherits SIGINT ignored, and Python then
+    # installs no Ctrl-C handler: install Python's own for this test, as an interactive terminal would have it.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with pytest.raises(KeyboardInterrupt):
             drive_plan(one_dwell_plan(dwell, lead_in_s=0.1), maestro.port, camera=camera,
@@ -289,6 +292,7 @@ def test_sigint_mid_dwell_returns_to_centre(maestro, tmp_path):
     finally:
         for timer in timers:
             timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     maestro.stop()
     assert_left_safe(maestro)
     led_off = next(c for c in maestro.targets(LED) if c.value == LED_OFF_QUS)

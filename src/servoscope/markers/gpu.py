@@ -281,10 +281,11 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
     Returns
     -------
     dict
-        ``resident_fps`` (frames in GPU memory), ``host_fps`` (staged through
-        pinned memory, copied and reduced on two streams so that copies and
-        kernels overlap), ``copy_fps`` (the same staging and copies without
-        the kernel: the bound for ``host_fps``), ``host_over_copy``,
+        ``resident_fps`` (frames in GPU memory), ``host_fps`` (from
+        page-locked host memory, copied and reduced on two streams so that
+        one batch's copy overlaps the other's kernel), ``copy_fps`` (the same
+        copies without the kernel: the host-to-device copy rate, the bound
+        for ``host_fps``), ``host_over_copy``,
         ``bytes_per_frame``.
     """
     n, nbytes = chroma.shape
@@ -300,13 +301,13 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
     cuda.synchronize()
     resident = batch * resident_passes / (time.perf_counter() - start)
 
+    chroma = np.ascontiguousarray(chroma, dtype=np.uint8)
     streams = [cuda.stream(), cuda.stream()]
-    pinned = [cuda.pinned_array((batch, nbytes), dtype=np.uint8) for _ in streams]
     sums_host = [cuda.pinned_array((batch,) + shape, dtype=np.int64) for _ in streams]
-    zeros = np.zeros((batch,) + shape, dtype=np.int64)
+    zeros = cuda.pinned_array((batch,) + shape, dtype=np.int64)
+    zeros[:] = 0
     d_in = [cuda.device_array((batch, nbytes), dtype=np.uint8) for _ in streams]
     d_out = [cuda.to_device(zeros) for _ in streams]
-
     sums = np.zeros((n,) + shape, dtype=np.int64)
 
     def stream_all(with_kernel: bool) -> float:
@@ -319,8 +320,7 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
             streams[s].synchronize()  # this slot's previous batch is done with its buffers
             if pending[s] is not None:
                 sums[pending[s][0]:pending[s][0] + pending[s][1]] = sums_host[s][:pending[s][1]]
-            pinned[s][:m] = chroma[lo:lo + m]
-            d_in[s].copy_to_device(pinned[s], stream=streams[s])
+            d_in[s][:m].copy_to_device(chroma[lo:lo + m], stream=streams[s])
             if with_kernel:
                 d_out[s].copy_to_device(zeros, stream=streams[s])
                 classifier.launch(d_in[s], d_out[s], m, stream=streams[s])
@@ -332,8 +332,11 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
                 sums[job[0]:job[0] + job[1]] = sums_host[s][:job[1]]
         return n / (time.perf_counter() - start)
 
-    copy_fps = stream_all(False)
-    host_fps = stream_all(True)
+    # The frames' host memory is page-locked for the copies (as a decoder writing into pinned buffers
+    # would hand them over), so that copies are asynchronous and the copy rate is the link's.
+    with cuda.pinned(chroma):
+        copy_fps = stream_all(False)
+        host_fps = stream_all(True)
     return {"resident_fps": resident, "host_fps": host_fps, "copy_fps": copy_fps,
             "host_over_copy": host_fps / copy_fps, "bytes_per_frame": int(nbytes), "batch": batch, "sums": sums}
 
