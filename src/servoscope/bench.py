@@ -41,8 +41,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-__all__ = ["bench", "run_bench", "render_bench_clips", "check_targets", "BENCH_CLIPS", "TARGETS", "opencv_pipeline",
-           "decode_only", "whole_commands"]
+__all__ = ["bench", "run_bench", "render_bench_clips", "check_targets", "gpu_bench", "BENCH_CLIPS", "TARGETS",
+           "opencv_pipeline", "decode_only", "whole_commands"]
 
 LEAD = "#d62728"
 TRAIL = "#2ca02c"
