@@ -78,6 +78,7 @@ _SIMULATED = """
     empty = params[:1].copy()
     empty[0, [K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (300, 300, 400, 400)
     assert not gpu.GpuClassifier(empty, h, w).class_moments(frames).any()
+    assert classifier.class_moments(frames[:0]).shape == (0, 4, 3)
     print("ok")
 """
 

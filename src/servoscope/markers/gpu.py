@@ -257,6 +257,8 @@ class GpuClassifier:
     def class_sums(self, chroma: np.ndarray) -> np.ndarray:
         """(frames, markers, 3) int64: class count, Σi, Σj (chroma samples) of each marker in each frame."""
         chroma = np.ascontiguousarray(chroma, dtype=np.uint8)
+        if chroma.shape[0] == 0:  # no device allocation of zero bytes
+            return np.zeros((0, self.n_markers, 3), dtype=np.int64)
         d_sums = cuda.to_device(np.zeros((chroma.shape[0], self.n_markers, 3), dtype=np.int64))
         self.launch(cuda.to_device(chroma), d_sums, chroma.shape[0])
         return d_sums.copy_to_host()
