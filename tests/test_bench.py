@@ -2,6 +2,7 @@
 
 import json
 
+import pytest
 from click.testing import CliRunner
 
 from servoscope.bench import BENCH_CLIPS, TARGETS, _decoder_thread_counts, bench, check_targets
@@ -90,3 +91,17 @@ def test_bench_clips_are_what_they_say(tmp_path):
                 # x264's settings travel in the stream's SEI text: the camcorder clip is CABAC-coded.
                 first = bytes(next(container.demux(stream)))
                 assert (b"cabac=1" in first) == (preset != "ultrafast")
+
+
+def test_bench_gpu_only_renders_one_clip_and_says_why_not(tmp_path):
+    from servoscope.markers import gpu
+
+    if gpu.cuda_available():
+        pytest.skip("a CUDA GPU is present")
+    res = CliRunner().invoke(bench, ["--json", "--gpu-only", "--frames", "4", "--size", "160x128",
+                                     "--cache", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output.strip().splitlines()[-1])
+    # Only the uncompressed clip is rendered; no CPU measurement runs; nothing is judged without a GPU.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bench_160x128_4_raw.avi", "bench_160x128_4_raw.avi.ok"]
+    assert out["clips"] == {} and out["gpu"] == {"gpu": "no CUDA GPU on this machine"} and out["targets"] == []

@@ -66,8 +66,9 @@ BENCH_CLIPS: dict[str, tuple[str, float, str, str]] = {
 }
 
 
-def render_bench_clips(cache: Path, frames: int, width: int, height: int) -> dict[str, Path]:
-    """The benchmark's clips (:data:`BENCH_CLIPS`), rendered unless already in ``cache``."""
+def render_bench_clips(cache: Path, frames: int, width: int, height: int,
+                       keys: tuple[str, ...] | None = None) -> dict[str, Path]:
+    """The benchmark's clips (:data:`BENCH_CLIPS`, or those of ``keys``), rendered unless already in ``cache``."""
     from .simulate import Scene
     from .simulate.clips import render_clip
 
@@ -75,6 +76,8 @@ def render_bench_clips(cache: Path, frames: int, width: int, height: int) -> dic
     scene = Scene.for_size(width, height, background_seed=2)
     clips = {}
     for key, (codec, fps, preset, suffix) in BENCH_CLIPS.items():
+        if keys is not None and key not in keys:
+            continue
         name = f"bench_{width}x{height}_{frames}_{codec}" if codec == "raw" else \
             f"bench_{width}x{height}_{frames}_{codec}_{fps:g}fps_{preset}"
         path = cache / (name + suffix)
@@ -318,15 +321,41 @@ def _warm_up() -> None:
     K.track_frame_numba(y, c, c, 0, 1, prm, np.zeros(K.LED_NP), np.zeros((2, K.NQ)), np.zeros(K.LED_NQ))
 
 
+def _say_gpu(gpu_result: dict, say) -> None:
+    if "resident_fps" in gpu_result:
+        g = gpu_result
+        say(f"  gpu ({g['device']}): {g['resident_fps']:.0f} frames/s in GPU memory, {g['host_fps']:.0f} frames/s "
+            f"from host memory against {g['copy_fps']:.0f} copied alone ({g['host_over_copy']:.2f}x); "
+            f"sums equal the CPU's: {g['sums_equal_cpu']}")
+    else:
+        say(f"  gpu: {gpu_result['gpu']}")
+
+
+def _judge(result: dict, say) -> dict:
+    result["targets"] = check_targets(result)
+    for t in result["targets"]:
+        say(f"  target {t['what']}: {t['measured']:.2f}x (>= {t['target']:g}x) {'met' if t['met'] else 'NOT met'}")
+    return result
+
+
 def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Path | None = None,
-              repeat: int = 1, workers: int = 2, parallel_videos: int = 4, echo=None, whole: bool = False) -> dict:
-    """Run every measurement; a plain dict of frames/s and ratios (see the module's doc)."""
+              repeat: int = 1, workers: int = 2, parallel_videos: int = 4, echo=None, whole: bool = False,
+              gpu_only: bool = False) -> dict:
+    """Run every measurement; a plain dict of frames/s and ratios (see the module's doc).
+
+    ``gpu_only``: render the uncompressed clip only and time the GPU pass alone
+    (what a short session on a GPU machine needs).
+    """
     say = echo or (lambda s: None)
     cache = Path(cache) if cache is not None else _default_cache()
     say(f"clips: {cache} ({frames} frames {width}x{height}; rendered once)")
-    clips = render_bench_clips(cache, frames, width, height)
-    _warm_up()
+    clips = render_bench_clips(cache, frames, width, height, keys=("raw",) if gpu_only else None)
     result: dict = {"frames": frames, "size": f"{width}x{height}", "cpu_count": os.cpu_count(), "clips": {}}
+    if gpu_only:
+        result["gpu"] = gpu_bench(clips["raw"], frames)
+        _say_gpu(result["gpu"], say)
+        return _judge(result, say)
+    _warm_up()
     for codec, path in clips.items():
         row = {}
         for name, fn in (("decode", decode_only), ("track", lambda p: _track(str(p))), ("opencv", opencv_pipeline)):
@@ -346,13 +375,7 @@ def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Pa
             f"(same decoder settings), {row['track_over_best_decode']:.2f}x (fastest decoding)")
         result["clips"][codec] = row
     result["gpu"] = gpu_bench(clips["raw"], frames)
-    if "resident_fps" in result["gpu"]:
-        g = result["gpu"]
-        say(f"  gpu ({g['device']}): {g['resident_fps']:.0f} frames/s in GPU memory, {g['host_fps']:.0f} frames/s "
-            f"from host memory against {g['copy_fps']:.0f} copied alone ({g['host_over_copy']:.2f}x); "
-            f"sums equal the CPU's: {g['sums_equal_cpu']}")
-    else:
-        say(f"  gpu: {result['gpu']['gpu']}")
+    _say_gpu(result["gpu"], say)
     if workers > 1 and parallel_videos > 0:
         # The issue's pair: uncompressed footage and a camcorder's H.264.
         videos = [str(clips["raw"]), str(clips["h264"])] * max(1, parallel_videos // 2)
@@ -385,10 +408,7 @@ def run_bench(frames: int = 2000, width: int = 720, height: int = 576, cache: Pa
     if whole:
         result["whole"] = whole_commands(clips, cache, repeat=repeat, echo=say, decode_threads={
             codec: row["decode_best_threads"] for codec, row in result["clips"].items()})
-    result["targets"] = check_targets(result)
-    for t in result["targets"]:
-        say(f"  target {t['what']}: {t['measured']:.2f}x (>= {t['target']:g}x) {'met' if t['met'] else 'NOT met'}")
-    return result
+    return _judge(result, say)
 
 
 #: The issue's targets on a 2-core machine: (what, where in the result, at least).
@@ -430,7 +450,9 @@ def check_targets(result: dict) -> list[dict]:
               help="Processes of the multi-video run (1: skip it).")
 @click.option("--whole", is_flag=True,
               help="Also time whole processes: `python -m servoscope track` vs an OpenCV script and decode-only.")
-def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int, workers: int, whole: bool) -> None:
+@click.option("--gpu-only", is_flag=True, help="Only the GPU pass, on the uncompressed clip.")
+def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int, workers: int, whole: bool,
+          gpu_only: bool) -> None:
     """Tracking speed vs decoding alone and vs an OpenCV pipeline (raw and H.264 clips)."""
     try:
         width, height = (int(v) for v in size.lower().split("x"))
@@ -439,6 +461,6 @@ def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int
     if width % 2 or height % 2 or width < 64 or height < 64:
         raise click.BadParameter("width and height must be even and ≥ 64", param_hint="--size")
     echo = None if as_json else click.echo
-    result = run_bench(frames, width, height, cache, repeat, workers, echo=echo, whole=whole)
+    result = run_bench(frames, width, height, cache, repeat, workers, echo=echo, whole=whole, gpu_only=gpu_only)
     if as_json:
         click.echo(json.dumps(result))
