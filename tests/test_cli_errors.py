@@ -107,3 +107,14 @@ def test_simulate_rejects_an_impossible_camera_in_one_line(tmp_path, args, words
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and r.stderr.startswith("servoscope: error:") and words in r.stderr
     assert not (out / "campaign.toml").exists()
+
+
+def test_simulate_offers_every_codec_the_writer_has():
+    # The CLI lists the codecs itself (importing the writer would load numba for every command); they must agree.
+    import click
+
+    from servoscope.cli import simulate
+    from servoscope.video.writer import CODECS
+
+    choice = next(p for p in simulate.params if p.name == "codec").type
+    assert isinstance(choice, click.Choice) and sorted(choice.choices) == sorted(CODECS)
