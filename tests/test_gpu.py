@@ -79,6 +79,14 @@ _SIMULATED = """
     empty[0, [K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (300, 300, 400, 400)
     assert not gpu.GpuClassifier(empty, h, w).class_moments(frames).any()
     assert classifier.class_moments(frames[:0]).shape == (0, 4, 3)
+    # Rows wider than a block's threads (272 chroma samples: each thread takes 3, the last pass partly):
+    # random chroma, so that both classes are scattered over the whole row.
+    rng = np.random.default_rng(5)
+    wide = rng.integers(0, 256, size=(2, 48 * 3 // 2, 544), dtype=np.uint8)
+    both = gpu.bench_params(TrackerSettings("#d62728", "#2ca02c"), 544, 48)
+    cpu = gpu.class_moments_cpu(wide, both)
+    assert cpu[:, :, 0].min() > 0 and 2 * gpu.THREADS < 272
+    np.testing.assert_array_equal(gpu.GpuClassifier(both, 48, 544).class_moments(wide), cpu)
     print("ok")
 """
 
