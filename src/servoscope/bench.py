@@ -277,7 +277,7 @@ def gpu_bench(path: Path, frames: int, check_frames: int = 16, batch: int = 256,
             classifier = gpu.GpuClassifier(params, height, width)
         if len(check) < check_frames:
             check.append(frame.i420)
-        chroma.append(classifier.chroma_of(frame.i420[None])[0])
+        chroma.append(np.concatenate((frame.u, frame.v), axis=None))  # chroma_of's layout, from the planes
         if len(chroma) == frames:
             break
     rates = gpu.measure_rates(classifier, np.stack(chroma), batch=batch, resident_passes=resident_passes)

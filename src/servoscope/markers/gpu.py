@@ -69,7 +69,9 @@ def _nvvm_from_wheel() -> str | None:
         spec = importlib.util.find_spec("nvidia")
     except (ImportError, ValueError):
         return None
-    for base in (spec.submodule_search_locations or []) if spec is not None else []:
+    if spec is None:
+        return None
+    for base in spec.submodule_search_locations or []:
         home = Path(base) / "cuda_nvcc"
         if (home / "nvvm" / "libdevice").is_dir():
             os.environ["CUDA_HOME"] = str(home)
@@ -289,8 +291,9 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
         page-locked host memory, copied and reduced on two streams so that
         one batch's copy overlaps the other's kernel), ``copy_fps`` (the same
         copies without the kernel: the host-to-device copy rate, the bound
-        for ``host_fps``), ``host_over_copy``,
-        ``bytes_per_frame``.
+        for ``host_fps``), ``host_over_copy``, ``bytes_per_frame``,
+        ``batch``, and ``sums`` (frames, markers, 3): the streamed run's
+        integer sums of every frame, to check against the CPU.
     """
     n, nbytes = chroma.shape
     batch = max(1, min(batch, n))
@@ -316,14 +319,20 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
 
     def stream_all(with_kernel: bool) -> float:
         pending: list[tuple[int, int] | None] = [None, None]  # each slot's batch whose sums are on their way
+
+        def collect(s: int) -> None:  # once slot s's stream is idle
+            if pending[s] is not None:
+                lo, m = pending[s]
+                sums[lo:lo + m] = sums_host[s][:m]
+                pending[s] = None
+
         cuda.synchronize()
         start = time.perf_counter()
         for b, lo in enumerate(range(0, n, batch)):
             s = b % 2
             m = min(batch, n - lo)
             streams[s].synchronize()  # this slot's previous batch is done with its buffers
-            if pending[s] is not None:
-                sums[pending[s][0]:pending[s][0] + pending[s][1]] = sums_host[s][:pending[s][1]]
+            collect(s)
             d_in[s][:m].copy_to_device(chroma[lo:lo + m], stream=streams[s])
             if with_kernel:
                 d_out[s].copy_to_device(zeros, stream=streams[s])
@@ -331,9 +340,8 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
                 d_out[s].copy_to_host(sums_host[s], stream=streams[s])
                 pending[s] = (lo, m)
         cuda.synchronize()
-        for s, job in enumerate(pending):
-            if job is not None:
-                sums[job[0]:job[0] + job[1]] = sums_host[s][:job[1]]
+        for s in range(len(streams)):
+            collect(s)
         return n / (time.perf_counter() - start)
 
     # The frames' host memory is page-locked for the copies (as a decoder writing into pinned buffers
