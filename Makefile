@@ -23,7 +23,9 @@ demo: $(VENV)/.installed
 	$(VENV)/bin/servoscope demo --out demo-out
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	# One worker per core; a file's tests stay on one worker, so its session fixtures
+	# (rendered twin campaigns) are made once.
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 clean:
 	rm -rf $(VENV) demo-out
