@@ -125,8 +125,10 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
 
 @cli.command()
 @click.argument("video", type=click.Path(path_type=Path))
-@click.option("--lead", default="#d62728", show_default=True, help="Leading-edge marker colour (#rrggbb, CSS name, auto).")
-@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour.")
+@click.option("--lead", default="#d62728", show_default=True,
+              help="Leading-edge marker colour (#rrggbb, CSS name, auto); '#rrggbb@x,y' pins it to the blob at "
+                   "pixel (x, y) of the first frame.")
+@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour (@x,y pins it).")
 @click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
 @click.option("--exposure", "exposure_s", type=float, help="Exposure time in seconds (for the LED's sub-frame timing).")
@@ -142,7 +144,10 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     """Track the two markers through VIDEO and write the per-frame angles."""
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
+    from .markers.selection import parse_marker_spec
 
+    lead, lead_near = parse_marker_spec(lead, what="--lead")
+    trail, trail_near = parse_marker_spec(trail, what="--trail")
     for spec, what in ((lead, "--lead"), (trail, "--trail")):
         parse_colour(spec, what=what)
     led_spec = None if led.lower() == "none" else led
@@ -156,7 +161,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     if overlay is not None and overlay.suffix.lower() not in (".mp4", ".mov"):
         raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
-                               deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s)
+                               deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
+                               lead_near=lead_near, trail_near=trail_near)
     result = track_video(video, settings)
     if out_csv is None:
         out_csv = video.with_name(video.stem + ".track.csv")

@@ -19,6 +19,7 @@ from pathlib import Path
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
+from ..markers.selection import check_near
 
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
@@ -82,6 +83,9 @@ class Campaign:
         Tests left out because their video could not be read (``keep_going``).
     readout_s : float
         Rolling-shutter readout time (s); 0 for a global shutter.
+    lead_near, trail_near : (float, float) or None
+        A marker pinned by position (px, first frame), from
+        ``lead = {colour = "#…", near = [x, y]}``; None when not pinned.
     """
 
     path: Path
@@ -95,6 +99,8 @@ class Campaign:
     tests: tuple[TestSpec, ...] = field(default_factory=tuple)
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
     readout_s: float = 0.0
+    lead_near: tuple[float, float] | None = None
+    trail_near: tuple[float, float] | None = None
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -137,6 +143,7 @@ class Campaign:
             self.path, self.lead, self.trail, self.led, self.camera, self.exposure_s,
             self.input_units, self.settle_s, tuple(t for t in self.tests if t.label not in reasons),
             self.skipped + tuple(reasons.items()), readout_s=self.readout_s,
+            lead_near=self.lead_near, trail_near=self.trail_near,
         )
 
 
@@ -248,10 +255,27 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     for key in ("lead", "trail"):
         if key not in markers_t:
             problems.add(f"markers.{key}", "missing: give \"#rrggbb\", a CSS colour name, or \"auto\"")
-    for key in ("lead", "trail", "led"):
-        if key in markers_t:
+    near: dict[str, tuple[float, float] | None] = {"lead": None, "trail": None}
+    colours: dict[str, object] = dict(markers_t)
+    for key in ("lead", "trail"):
+        # A marker pinned by position, as a user clicks a point: {colour = "#…", near = [x, y]}.
+        entry = markers_t.get(key)
+        if isinstance(entry, dict):
+            unknown = set(entry) - {"colour", "near"}
+            if unknown or "colour" not in entry or "near" not in entry:
+                problems.add(f"markers.{key}", "a pinned marker is {colour = \"#rrggbb\", near = [x, y]}, "
+                             f"got keys {sorted(entry)}")
+                colours[key] = None
+                continue
+            colours[key] = entry["colour"]
             try:
-                spec = parse_colour(markers_t[key], what="colour")
+                near[key] = check_near(entry["near"], what="near")
+            except ServoscopeError as exc:
+                problems.add(f"markers.{key}.near", str(exc).removeprefix("near: "))
+    for key in ("lead", "trail", "led"):
+        if key in markers_t and colours[key] is not None:
+            try:
+                spec = parse_colour(colours[key], what="colour")
             except ServoscopeError as exc:
                 problems.add(f"markers.{key}", str(exc).removeprefix("colour: "))
             else:
@@ -364,8 +388,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     problems.raise_if_any()
     return Campaign(
         path=path.resolve(),
-        lead=str(markers_t["lead"]),
-        trail=str(markers_t["trail"]),
+        lead=str(colours["lead"]),
+        trail=str(colours["trail"]),
         led=None if markers_t.get("led") is None else str(markers_t["led"]),
         camera=camera,
         exposure_s=exposure,
@@ -374,4 +398,6 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         tests=tuple(tests),
         skipped=tuple(skipped),
         readout_s=float(readout or 0.0),
+        lead_near=near["lead"],
+        trail_near=near["trail"],
     )

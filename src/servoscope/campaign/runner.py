@@ -42,6 +42,8 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         camera=campaign.camera,
         exposure_s=campaign.exposure_s,
         readout_s=campaign.readout_s,
+        lead_near=campaign.lead_near,
+        trail_near=campaign.trail_near,
     )
 
 

@@ -31,6 +31,8 @@ from ..video.reader import iter_frames, iter_yuv_frames, probe_video, thread_bud
 from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
 from .moments import Moments, weighted_moments
+from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
+from .selection import choose_markers, marker_candidates
 from .timebase import frame_timing
 from . import kernels as K
 
@@ -104,6 +106,11 @@ class TrackerSettings:
         fails clearly without one; the paper's batch reduction is
         :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
         windowed sub-pixel kernel itself still runs on the CPU.
+    lead_near, trail_near : (float, float) or None
+        Pin a marker by position (px in the first frame), as a user clicks a
+        point: the marker is the blob of its colour there (an error when
+        there is none). None (the default): the best-scoring pair of blobs
+        (see :mod:`servoscope.markers.selection`).
     readout_s : float
         Rolling-shutter readout time, seconds (0, the default: a global
         shutter). Row y of a frame is taken as exposed around
@@ -126,6 +133,8 @@ class TrackerSettings:
     engine: str = "auto"
     backend: str = "auto"
     readout_s: float = 0.0
+    lead_near: tuple[float, float] | None = None
+    trail_near: tuple[float, float] | None = None
 
 
 @dataclass
@@ -238,7 +247,8 @@ class Track:
         see :func:`servoscope.markers.angle_error_analysis`) and
         ``angle_noise_measured_rad`` (the tracking error measured on the
         markers' rigid-motion null channel, codec errors included; None
-        with fewer than 20 valid frames).
+        with fewer than 20 valid frames; from the separation's spread when
+        the camera shakes), ``camera_shake_px`` (the shake seen, RMS px).
         """
         from .error_analysis import angle_error_analysis
 
@@ -252,6 +262,7 @@ class Track:
             "centroid_sigma_px": analysis.get("centroid_sigma_px"),
             "angle_noise_rad": analysis.get("angle_sigma_rad"),
             "angle_noise_measured_rad": analysis.get("measured_noise_rad"),
+            "camera_shake_px": analysis.get("camera_shake_px"),
             "t0_s": self.t0_s,
             "t0_uncertainty_s": self.t0_uncertainty_s,
             "warnings": list(self.warnings),
@@ -338,6 +349,9 @@ class _MarkerTracker:
         self.reach_px: float | None = None  # sticker radius from its centroid (px)
         self._ref: list[tuple[float, float, float]] = []  # (m00, major, minor) of early frames
         self.reference: tuple[float, float, float] | None = None
+        # Where the first detection found this marker (see markers.selection): before the first
+        # accepted position, the blob nearest to it is taken, not the largest of the colour.
+        self.hint: tuple[float, float] | None = None
 
     # -- detection ---------------------------------------------------------
     def _components(self, rgb: np.ndarray, window: tuple[int, int, int, int]):
@@ -387,9 +401,10 @@ class _MarkerTracker:
             if not ok.any():
                 continue
             candidates = np.flatnonzero(ok)
-            if predicted is not None:
+            target = predicted if predicted is not None else (None if self.hint is None else np.array(self.hint))
+            if target is not None:
                 centres = stats[candidates, :2] + stats[candidates, 2:4] / 2.0 + np.array(window[:2])
-                best = candidates[np.argmin(np.hypot(*(centres - predicted).T))]
+                best = candidates[np.argmin(np.hypot(*(centres - target).T))]
             else:
                 best = candidates[np.argmax(areas[candidates])]
             blob = self._refine(rgb, window, labels == best + 1)
@@ -495,6 +510,26 @@ class _MarkerTracker:
 
     def lose(self) -> None:
         self._velocity = (0.0, 0.0)
+
+
+def _choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettings) -> list[str]:
+    """Choose each marker's blob in the first frame (see :mod:`.selection`); set the trackers' hints.
+
+    Returns the close-call warnings. When a marker's colour matches no blob
+    big enough to be a candidate, no hint is set and the first detection
+    reports it as before (the closest coloured blobs listed), unless the marker
+    is pinned: then the pin's error names the nearest blob.
+    """
+    lead, trail = trackers
+    cands = [marker_candidates(rgb, t.model, t.model.hue) if t.model is not None else [] for t in trackers]
+    pinned = settings.lead_near is not None or settings.trail_near is not None
+    if not pinned and not all(cands):
+        return []
+    choice = choose_markers(cands[0], cands[1], lead_near=settings.lead_near, trail_near=settings.trail_near,
+                            lead_colour=_spec_text(lead.seed), trail_colour=_spec_text(trail.seed), source=str(path))
+    lead.hint = (choice.lead.x_px, choice.lead.y_px)
+    trail.hint = (choice.trail.x_px, choice.trail.y_px)
+    return choice.warnings
 
 
 def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
@@ -702,6 +737,8 @@ def track_video(
                         if not models:
                             raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
                         tracker.model = models.pop(0)
+            if frame.index == 0:
+                warnings.extend(_choose_first(path, rgb, (lead, trail), settings))
             # A camcorder's duplicated frame: the same image under a new timestamp.
             repeated.append(prev_rgb is not None and prev_rgb.shape == rgb.shape and np.array_equal(prev_rgb, rgb))
             prev_rgb = rgb
@@ -780,6 +817,7 @@ def track_video(
                 for i in bad:
                     valid[i] = False
                     reasons[i] = reasons[i] or f"{name} centroid outside the calibrated region"
+    _flag_nonrigid(path, lead_arr, trail_arr, valid, reasons, warnings)
     angle = angle_rad_from_centroids(lead_arr, trail_arr)
     angle[~valid] = np.nan
     if valid.any():
@@ -1025,6 +1063,53 @@ def _nearest_ring_background(roi: np.ndarray, ring: np.ndarray) -> np.ndarray | 
     lut = np.zeros((int(labels.max()) + 1, roi.shape[2]))
     lut[labels[ring]] = smooth[ring]
     return lut[labels]
+
+
+#: A frame's marker separation may depart from the track's median by this many times the
+#: separation's frame-to-frame noise, and at least :data:`_RIGID_FLOOR_PX` px or
+#: :data:`_RIGID_FLOOR_FRACTION` of the separation (a lens's focus breathing, a blade that bends
+#: a little): more, and the two "markers" did not keep their distance in that frame.
+_RIGID_SIGMAS = 6.0
+_RIGID_FLOOR_PX = 0.5
+_RIGID_FLOOR_FRACTION = 0.005
+
+
+def _flag_nonrigid(path: Path, lead: np.ndarray, trail: np.ndarray, valid: np.ndarray, reasons: list[str],
+                   warnings: list[str]) -> None:
+    """Invalidate frames whose marker separation changed; refuse a track where most did.
+
+    Two stickers on one rigid blade keep their distance whatever the blade
+    does and wherever the camera is. Two things that only have the markers'
+    colours (clothing of passers-by, a box and a sticker) do not.
+
+    Raises
+    ------
+    ServoscopeError
+        When more than half the otherwise valid frames changed their separation.
+    """
+    sep = np.hypot(*(lead - trail).T)
+    ok = valid & np.isfinite(sep)
+    if np.count_nonzero(ok) < 10:
+        return
+    med = float(np.median(sep[ok]))
+    steps = np.diff(sep[ok])
+    # Frame-to-frame changes: noise (√2 σ) where the blade is rigid, whatever the median does.
+    sigma = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) / math.sqrt(2.0)
+    allow = max(_RIGID_SIGMAS * sigma, _RIGID_FLOOR_PX, _RIGID_FLOOR_FRACTION * med)
+    bad = ok & (np.abs(sep - med) > allow)
+    n_bad, n_ok = int(np.count_nonzero(bad)), int(np.count_nonzero(ok))
+    if n_bad > n_ok / 2:
+        lo, hi = float(np.min(sep[ok])), float(np.max(sep[ok]))
+        raise ServoscopeError(
+            f"{path}: the two markers' distance changes from {lo:.0f} to {hi:.0f} px in {n_bad} of {n_ok} frames "
+            f"(a rigid blade keeps it within {allow:.1f} px): these are not two stickers on one rigid part; "
+            "check the marker colours (`servoscope markers`) or pin them (--lead '#rrggbb@x,y')")
+    for i in np.flatnonzero(bad):
+        valid[i] = False
+        reasons[i] = reasons[i] or f"separation changed ({sep[i] - med:+.1f} px from the track's {med:.1f} px)"
+    if n_bad:
+        warnings.append(f"{n_bad} frame(s) where the markers' separation changed by more than {allow:.1f} px "
+                        "marked invalid")
 
 
 def _flag_repeated(repeated: np.ndarray, lead: np.ndarray, trail: np.ndarray, reasons: list[str],
@@ -1286,9 +1371,14 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
 
         require_cuda()  # the per-window sub-pixel work stays on the CPU (see gpu.py)
 
+    gain_of = GlobalGain()
+    gain = 1.0  # this frame's illumination against the first frame's (see illumination.py)
+    gains: list[float] = []
+
     def measure_one(k: int, frame, window, centre=None) -> _Blob | None:
         one = np.zeros((2, K.NP))
         one[k] = trackers[k].yuv.prm
+        _apply_gain(one[k], gain)
         one[k, K.P.X0:K.P.Y1 + 1] = window
         if centre is not None:
             one[k, K.P.CX], one[k, K.P.CY], one[k, K.P.USE_CENTRE] = centre[0], centre[1], 1.0
@@ -1303,6 +1393,8 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
         # A camcorder's duplicated frame: the same image under a new timestamp.
         repeated.append(prev is not None and _same_image(prev, frame))
         prev = frame
+        gain = gain_of(frame.y, frame.row_offset)
+        gains.append(gain)
         found: dict[str, _Blob] = {}
         reason = ""
         slow = False
@@ -1317,6 +1409,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
                         if not models:
                             raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
                         tracker.model = models.pop(0)
+            warnings.extend(_choose_first(path, rgb, trackers, settings))
             first = {}
             for tracker in trackers:
                 blob, why = tracker.find(rgb)
@@ -1338,6 +1431,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
         windows = []
         for k, tracker in enumerate(trackers):
             params[k] = tracker.yuv.prm
+            _apply_gain(params[k], gain)
             window = _window(tracker, shape) if tracker.has_position or not slow else None
             if window is None and slow:
                 m = first[tracker.name].moments  # the first frame: around the found blob
@@ -1392,7 +1486,24 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
                 led_peak_dn.append(_disk_peak(frame.y, led_out[2], led_out[3], led_prm[3]))
         if progress is not None and frame.index % 50 == 0:
             progress(frame.index + 1)
+    corrected = [g for g in gains if abs(g - 1.0) > GAIN_DEADBAND]
+    if corrected:
+        lo, hi = min(gains), max(gains)
+        warnings.append(f"illumination varied ({100 * (lo - 1):+.1f} % to {100 * (hi - 1):+.1f} % of the first "
+                        f"frame's: flicker, auto-exposure or clouds) in {len(corrected)} of {len(gains)} frames; "
+                        "the markers' colours were scaled with it")
     return snapshot, snapshot_index
+
+
+def _apply_gain(prm: np.ndarray, gain: float) -> None:
+    """Scale a marker's learned colour (and saturation floor) in its kernel row to this frame's light.
+
+    Within :data:`~servoscope.markers.illumination.GAIN_DEADBAND` of 1 the row is left as it is.
+    """
+    if abs(gain - 1.0) <= GAIN_DEADBAND:
+        return
+    prm[K.P.YM], prm[K.P.UM], prm[K.P.VM] = scale_colour((prm[K.P.YM], prm[K.P.UM], prm[K.P.VM]), gain)
+    prm[K.P.SAT_MIN] *= min(gain, 1.0)
 
 
 #: Frames whose brightest LED pixel is checked for clipping, and the luma that counts as

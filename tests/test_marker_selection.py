@@ -1,0 +1,225 @@
+"""Choosing the markers as a person would; tracking that light, shake and clutter do not fool.
+
+Scenes are the twin's frames edited as a workshop would edit them: a larger
+red-brown box of nearly the lead sticker's hue, lamps flickering at 100 Hz,
+a second sticker-like disc, a camera that shakes, two coloured things that
+are not on one rigid blade. The truth is the twin's sticker centres (moved
+with the shake where there is one).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from servoscope.cli import main
+from servoscope.errors import ServoscopeError
+from servoscope.markers import TrackerSettings, track_video
+from servoscope.markers.illumination import GlobalGain
+from servoscope.markers.selection import parse_marker_spec
+from servoscope.simulate import Scene
+from servoscope.simulate.render import FrameRenderer
+from servoscope.simulate.scene import marker_angle_rad
+from servoscope.video.writer import VideoWriter
+
+W, H = 480, 384
+BOX_RGB = (160, 48, 42)  # red-brown: the lead sticker's hue (#d62728) within 4°
+
+
+def _clip(path: Path, *, n: int = 120, fps: float = 200.0, box: bool = False, flicker: float = 0.0,
+          flicker_phase: float = math.pi / 2, shake_px: float = 0.0, decoy: tuple[float, float] | None = None,
+          seed: int = 0) -> np.ndarray:
+    """Render a sine of the blade, edit each frame, encode H.264; return the true angle per frame.
+
+    ``flicker``: every frame scaled by 1 + flicker·sin(2π·100·t + phase) (at 200 frames/s
+    and phase π/2 the frames alternate bright and dim, the issue's case). ``shake_px``: each
+    frame translated by a seeded Gaussian (σ per axis), the truth moved with it. ``decoy``:
+    a disc of the lead sticker's colour and size drawn there.
+    """
+    scene = Scene.for_size(W, H, background_seed=1)
+    t = np.arange(n) / fps
+    pitch = 0.05 * np.sin(2 * np.pi * 1.5 * t)
+    renderer = FrameRenderer(scene, noise_sigma_dn=1.5, noise_seed=seed)
+    lead, trail = scene.sticker_centres_px(pitch)
+    rng = np.random.default_rng(seed)
+    radius = scene.sticker_diameter_px / 2.0
+    with VideoWriter(path, W, H, fps, codec="h264", bit_rate=20_000_000) as writer:
+        for i in range(n):
+            f = renderer.render(float(pitch[i]), 1.0, i).astype(np.float64)
+            if box:
+                # Larger than a sticker, in the top-right corner, touching the border.
+                cv2.rectangle(f, (W - 70, 0), (W - 1, 45), BOX_RGB, -1)
+            if decoy is not None:
+                cv2.circle(f, (int(decoy[0] * 16), int(decoy[1] * 16)), int(radius * 16), (214, 39, 40), -1,
+                           cv2.LINE_AA, shift=4)
+            if flicker:
+                f *= 1.0 + flicker * math.sin(2 * math.pi * 100.0 * t[i] + flicker_phase)
+            if shake_px:
+                dx, dy = rng.normal(0.0, shake_px, 2)
+                f = cv2.warpAffine(f, np.float32([[1, 0, dx], [0, 1, dy]]), (W, H), flags=cv2.INTER_CUBIC,
+                                   borderMode=cv2.BORDER_REFLECT)
+                lead[i] += (dx, dy)
+                trail[i] += (dx, dy)
+            writer.write(np.clip(np.round(f), 0, 255).astype(np.uint8))
+    return marker_angle_rad(lead, trail)
+
+
+def _run(capsys, *args) -> tuple[int, str]:
+    """Run the command line in-process: (exit status, what it printed)."""
+    try:
+        main([str(a) for a in args])
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    return code, out.out + out.err
+
+
+def _rms_deg(track, truth) -> float:
+    err = np.degrees(np.angle(np.exp(1j * (track.angle_rad - truth))))[track.valid]
+    return float(np.sqrt(np.mean(err**2)))
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sel")
+    out = {}
+    for name, kw in {
+        "clean": {},
+        "box_flicker": {"box": True, "flicker": 0.08},
+        "flicker240": {"flicker": 0.08, "fps": 240.0, "flicker_phase": 0.0},
+        "decoy": {"decoy": (60.0, 330.0)},
+        "shake": {"shake_px": 0.3},
+    }.items():
+        out[name] = (d / f"{name}.mp4", _clip(d / f"{name}.mp4", **kw))
+    return out
+
+
+# -- 1. the first detection weighs colour, size, shape and the border --------------------------
+def test_box_and_100hz_flicker_every_frame_valid_and_accurate(clips):
+    """The issue's scene: a larger box of the lead's hue at the border and 8 % flicker at 100 Hz.
+
+    Before: the box was taken for the lead marker (0 valid frames); with flicker alone, half
+    the frames were "partly hidden". Now every frame is valid and the angle within target.
+    """
+    path, truth = clips["box_flicker"]
+    tr = track_video(path, TrackerSettings(led=None))
+    assert tr.valid.all(), set(tr.reason)
+    assert _rms_deg(tr, truth) < 0.01
+    assert any("illumination varied" in w for w in tr.warnings)
+    clean = track_video(clips["clean"][0], TrackerSettings(led=None))
+    # The box and flicker cost no accuracy: at most 0.002° worse than the clean clip.
+    assert _rms_deg(tr, truth) < _rms_deg(clean, clips["clean"][1]) + 0.002
+
+
+def test_flicker_at_240_fps_never_invalid(clips):
+    """Flicker at 100 Hz filmed at 240 frames/s: every gain between 0.92 and 1.08 occurs."""
+    path, truth = clips["flicker240"]
+    tr = track_video(path, TrackerSettings(led=None))
+    assert tr.valid.all(), set(tr.reason)
+    assert _rms_deg(tr, truth) < 0.01
+
+
+def test_global_gain_recovers_a_scaled_frame():
+    rng = np.random.default_rng(3)
+    base = rng.uniform(40, 220, (384, 480))
+    gain = GlobalGain()
+    assert gain(np.round(base).astype(np.uint8)) == 1.0  # the reference
+    for g in (0.85, 0.92, 1.0, 1.07):
+        frame = 16.0 + g * (base - 16.0) + rng.normal(0, 1.5, base.shape)
+        # A moving object over a third of the grid must not move the median.
+        frame[:, :150] = rng.uniform(0, 255, (384, 150))
+        assert gain(np.clip(np.round(frame), 0, 255).astype(np.uint8)) == pytest.approx(g, abs=0.004)
+
+
+def test_close_call_warns_naming_both_candidates(clips):
+    path, truth = clips["decoy"]
+    tr = track_video(path, TrackerSettings(led=None))
+    close = [w for w in tr.warnings if "close call" in w]
+    assert close and close[0].startswith("lead marker")
+    # Both named by colour, position and size, and how to pin the other.
+    assert close[0].count(" px") >= 2 and "(60, 330)" in close[0] and "near = [" in close[0] and "@" in close[0]
+
+
+def test_pinned_marker_is_the_blob_there(clips):
+    path, truth = clips["decoy"]
+    scene = Scene.for_size(W, H, background_seed=1)
+    lead0, trail0 = scene.sticker_centres_px(0.0)
+    tr = track_video(path, TrackerSettings(led=None, lead_near=(float(lead0[0]) + 2, float(lead0[1]) - 1)))
+    assert tr.valid.all()
+    assert not any("close call" in w for w in tr.warnings)  # the user chose: no warning
+    assert np.hypot(*(tr.lead_xy_px[0] - lead0)) < 1.0
+    assert _rms_deg(tr, truth) < 0.01
+
+
+def test_cli_pin_parses_and_bad_pins_exit_2_writing_nothing(clips, tmp_path, capsys):
+    path, _ = clips["clean"]
+    assert parse_marker_spec("#d62728@12.5,30") == ("#d62728", (12.5, 30.0))
+    assert parse_marker_spec("red") == ("red", None)
+    out = tmp_path / "t.csv"
+    # Where there is no red blob at all.
+    code, text = _run(capsys, "track", path, "--led", "none", "--lead", "#d62728@20,20", "--out", out)
+    assert code == 2 and not out.exists() and text.startswith("servoscope: error: ") and text.count("\n") == 1
+    assert str(path) in text and "pinned at (20, 20)" in text and "nearest blob" in text
+    # Both markers pinned to the same blob (one colour for both).
+    scene = Scene.for_size(W, H, background_seed=1)
+    lead0, _ = scene.sticker_centres_px(0.0)
+    at = f"{lead0[0]:.1f},{lead0[1]:.1f}"
+    code, text = _run(capsys, "track", path, "--led", "none", "--lead", f"#d62728@{at}", "--trail", f"#d62728@{at}",
+                      "--out", out)
+    assert code == 2 and not out.exists() and "same blob" in text and str(path) in text
+    code, text = _run(capsys, "track", path, "--led", "none", "--lead", "#d62728@x,3", "--out", out)
+    assert code == 2 and not out.exists() and "--lead" in text
+
+
+def test_manifest_pin(tmp_path):
+    from servoscope.campaign.manifest import load_campaign
+
+    toml = tmp_path / "campaign.toml"
+    toml.write_text('[markers]\nlead = {colour = "#d62728", near = [120, 45.5]}\ntrail = "#2ca02c"\n'
+                    '[input]\n[[tests]]\nvideo = "a.mp4"\nkind = "step"\namplitude = 0.2\n')
+    c = load_campaign(toml, check_videos=False)
+    assert c.lead == "#d62728" and c.lead_near == (120.0, 45.5) and c.trail_near is None
+    toml.write_text('[markers]\nlead = {colour = "#d62728", near = [-1, 4]}\ntrail = "#2ca02c"\n'
+                    '[input]\n[[tests]]\nvideo = "a.mp4"\nkind = "step"\namplitude = 0.2\n')
+    with pytest.raises(ServoscopeError, match=r"campaign.toml: markers.lead.near: .*>= 0"):
+        load_campaign(toml, check_videos=False)
+
+
+# -- 4. two stickers on one rigid part keep their distance ----------------------------------------
+def test_things_that_are_not_on_one_rigid_part_end_in_a_clear_error(tmp_path, capsys):
+    """A red and a green thing walking about (people's clothing): no track, exit 2."""
+    n, fps = 60, 25
+    path = tmp_path / "walk.mp4"
+    rng = np.random.default_rng(5)
+    texture = cv2.GaussianBlur(rng.uniform(60, 180, (H, W)), (0, 0), 3)
+    with VideoWriter(path, W, H, fps, codec="h264", bit_rate=8_000_000) as writer:
+        for i in range(n):
+            f = np.repeat(texture[..., None], 3, axis=2)
+            cv2.ellipse(f, (60 + 5 * i, 200), (14, 30), 0, 0, 360, (200, 30, 35), -1, cv2.LINE_AA)
+            cv2.ellipse(f, (420 - 3 * i, 150 + i), (12, 28), 0, 0, 360, (40, 160, 45), -1, cv2.LINE_AA)
+            writer.write(np.clip(f, 0, 255).astype(np.uint8))
+    with pytest.raises(ServoscopeError, match="not two stickers on one rigid part"):
+        track_video(path, TrackerSettings(led=None))
+    out = tmp_path / "walk.csv"
+    code, text = _run(capsys, "track", path, "--led", "none", "--out", out)
+    assert code == 2 and not out.exists() and str(path) in text and "rigid" in text
+
+
+# -- 6. measured angle noise, with and without camera shake ---------------------------------------
+@pytest.mark.parametrize("name", ["clean", "shake"])
+def test_measured_angle_noise_within_1p5_of_true_error(clips, name):
+    path, truth = clips[name]
+    tr = track_video(path, TrackerSettings(led=None))
+    err = np.angle(np.exp(1j * (tr.angle_rad - truth)))[tr.valid]
+    true_rad = float(np.std(err))
+    s = tr.summary()
+    assert 1 / 1.5 < s["angle_noise_measured_rad"] / true_rad < 1.5
+    if name == "shake":
+        assert s["camera_shake_px"] == pytest.approx(0.3, rel=0.3)
+    else:
+        assert s["camera_shake_px"] == 0.0
