@@ -223,3 +223,22 @@ def test_measured_angle_noise_within_1p5_of_true_error(clips, name):
         assert s["camera_shake_px"] == pytest.approx(0.3, rel=0.3)
     else:
         assert s["camera_shake_px"] == 0.0
+
+
+# -- 5. the LED beside a sticker of a neighbouring hue ------------------------------------------
+def test_yellow_led_beside_an_orange_sticker_is_found(tmp_path):
+    """The issue's third campaign: orange and violet stickers, the yellow LED on the blade.
+
+    The LED's hue band reaches the orange sticker's, which is larger: it was taken for the LED
+    ("LED brightness does not change"). With the markers' disks masked out, the LED is found
+    and its switch time is the twin's (frame 40 at 100 frames/s lit for 0.3 of its exposure).
+    """
+    from servoscope.simulate.clips import render_clip
+
+    scene = Scene.for_size(W, H, background_seed=1, lead_colour="#ff7f0e", trail_colour="#9467bd")
+    n = 80
+    led = np.r_[np.ones(40), 0.3, np.zeros(n - 41)]
+    render_clip(tmp_path / "led.mp4", scene, 0.03 * np.sin(np.arange(n) / 8.0), fps=100, led_level=led)
+    tr = track_video(tmp_path / "led.mp4", TrackerSettings("#ff7f0e", "#9467bd", "#ffd400"))
+    assert tr.valid.all() and not tr.warnings
+    assert tr.t0_s == pytest.approx(0.40 - 0.005 + 0.3 * 0.01, abs=3 * tr.t0_uncertainty_s + 1e-4)

@@ -1169,14 +1169,30 @@ def _marker_axes(lead: Moments, trail: Moments) -> tuple[np.ndarray, np.ndarray,
 
 
 def _locate_led(rgb, model: ColourModel, lead: Moments, trail: Moments):
+    """The LED's position in the markers' frame (units of their separation) and its radius (px).
+
+    The LED is the largest blob of its colour once the markers' own disks are
+    masked out: a yellow LED's hue band reaches an orange sticker's, whose
+    brightness never changes. Where several blobs remain, those within a
+    separation of the markers' segment (on or by the blade) come first.
+    """
     mask = model.mask(rgb).astype(np.uint8)
+    for m in (lead, trail):
+        # Cover the sticker and its blurred edge: its equivalent radius grown by half, plus 3 px.
+        r = 1.5 * math.sqrt(max(m.m00, 0.0) / math.pi) + 3.0
+        cv2.circle(mask, (int(round(m.x_px)), int(round(m.y_px))), int(math.ceil(r)), 0, -1)
     n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n <= 1:
         return None, 0.0
-    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    origin, e, nrm, length = _marker_axes(lead, trail)
+    rel = cents[1:] - origin
+    along, across = rel @ e, rel @ nrm
+    off = np.maximum(np.maximum(-along, along - length), 0.0)
+    near = np.hypot(off, across) <= length
+    areas = stats[1:, cv2.CC_STAT_AREA].astype(np.float64)
+    best = 1 + int(np.argmax(np.where(near, areas, -1.0) if near.any() else areas))
     if stats[best, cv2.CC_STAT_AREA] < 3:
         return None, 0.0
-    origin, e, nrm, length = _marker_axes(lead, trail)
     d = cents[best] - origin
     local = np.array([d @ e, d @ nrm]) / length
     radius = math.sqrt(stats[best, cv2.CC_STAT_AREA] / math.pi)
