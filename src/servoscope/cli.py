@@ -99,8 +99,8 @@ def cli() -> None:
 @click.argument("outdir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--preset", default="paper", show_default=True, help="Campaign preset (paper, quick).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed: same seed, same footage.")
-@click.option("--codec", type=click.Choice(["h264", "mpeg2", "raw"]),
-              help="Video codec (preset's: h264; mpeg2: HDV's, the paper's camera).")
+@click.option("--codec", type=click.Choice(["h264", "hevc", "mpeg2", "raw"]),
+              help="Video codec (preset's: h264; hevc: phones' H.265; mpeg2: HDV's, the paper's camera).")
 @click.option("--bit-rate", type=click.IntRange(min=100_000), help="H.264 or MPEG-2 bit rate, bit/s (preset's: 20000000, a camcorder's; HDV: 25000000).")
 @click.option("--fps", type=click.FloatRange(min=1.0), help="Frame rate, frames/s (preset's: 100).")
 @click.option("--exposure", "exposure_s", type=click.FloatRange(min=0.0, min_open=True),

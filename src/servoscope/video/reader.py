@@ -3,6 +3,14 @@
 Times come from each frame's presentation timestamp (PTS × time base), never
 from frame index × nominal rate: camcorders drop and duplicate frames, and
 variable-frame-rate phones have no nominal rate at all.
+
+Whatever the source's samples (8 or 10 bits, 4:2:0 / 4:2:2 / 4:4:4, limited
+or full range, BT.601 or BT.709 matrix, read from the stream's tags), the
+YUV path hands the trackers what they expect, 8-bit 4:2:0 limited-range
+BT.601, converted by the standard equations (:mod:`servoscope.video.colour`),
+and the RGB path the source's own R'G'B'. Frames come upright, as a player
+shows them: a phone's rotation (the container's display matrix) is applied.
+Untagged 8-bit yuv420p (servoscope's own twin) passes through untouched.
 """
 
 from __future__ import annotations
@@ -18,9 +26,11 @@ import av
 import numpy as np
 
 from ..errors import ServoscopeError
+from .colour import YuvLayout, layout_of_format, to_i420_bt601, to_rgb
 
 __all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames",
-           "yuv_planes", "is_intra", "configure_decoder", "default_decoder_threads", "i420_of_planes"]
+           "yuv_planes", "is_intra", "configure_decoder", "default_decoder_threads", "i420_of_planes",
+           "frame_layout", "quarter_turns", "native_planes", "frame_rgb"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +44,8 @@ class VideoInfo:
         Frame size in pixels.
     codec : str
         Decoder name, e.g. ``"h264"`` or ``"rawvideo"``.
+        Frame size in pixels as the frames come, upright (a phone's portrait
+        video stored as 1920×1080 with a 90° rotation reads as 1080×1920).
     pixel_format : str
         e.g. ``"yuv420p"``.
     frame_rate_hz : float or None
@@ -41,6 +53,17 @@ class VideoInfo:
     frame_count : int or None
         Frames the container announces (0 or None when unknown).
     duration_s : float or None
+    bit_depth : int or None
+        Bits per sample (8, 10, …; None for formats other than planar Y'CbCr).
+    chroma_subsampling : str or None
+        ``"4:2:0"``, ``"4:2:2"``, ``"4:4:4"``…
+    color_range : str or None
+        ``"tv"`` (limited) or ``"pc"`` (full, JPEG), as tagged; untagged reads as ``"tv"``.
+    matrix : str or None
+        ``"bt601"``, ``"bt709"``, …, as tagged; untagged reads as ``"bt601"`` (FFmpeg's default).
+    rotation_deg : int
+        Counter-clockwise rotation applied to show the frames upright (the
+        container's display matrix; 0, 90, 180 or 270).
     """
 
     path: Path
@@ -51,6 +74,11 @@ class VideoInfo:
     frame_rate_hz: float | None
     frame_count: int | None
     duration_s: float | None
+    bit_depth: int | None = 8
+    chroma_subsampling: str | None = "4:2:0"
+    color_range: str | None = "tv"
+    matrix: str | None = "bt601"
+    rotation_deg: int = 0
 
 
 @dataclass(frozen=True)
@@ -145,18 +173,90 @@ def probe_video(path: str | Path) -> VideoInfo:
             duration = float(stream.duration * stream.time_base)
         elif container.duration is not None:
             duration = container.duration / 1e6
+        pix_fmt = ctx.format.name if ctx.format is not None else None
+        layout = layout_of_format(pix_fmt or "", ctx.color_range, ctx.colorspace)
+        turns = _first_frame_turns(container, stream)
+        width, height = (int(ctx.height), int(ctx.width)) if turns % 2 else (int(ctx.width), int(ctx.height))
         return VideoInfo(
             path=path,
-            width=int(ctx.width),
-            height=int(ctx.height),
+            width=width,
+            height=height,
             codec=ctx.name,
-            pixel_format=ctx.format.name if ctx.format is not None else None,
+            pixel_format=pix_fmt,
             frame_rate_hz=float(rate) if rate else None,
             frame_count=int(stream.frames) if stream.frames else None,
             duration_s=duration,
+            bit_depth=layout.bit_depth if layout else None,
+            chroma_subsampling=layout.subsampling if layout else None,
+            color_range=None if layout is None else ("pc" if layout.full_range else "tv"),
+            matrix=layout.matrix if layout else None,
+            rotation_deg=90 * turns,
         )
     finally:
         container.close()
+
+
+def _first_frame_turns(container, stream) -> int:
+    """Quarter turns of the first frame (the display matrix reaches PyAV on decoded frames only)."""
+    try:
+        for frame in container.decode(stream):
+            return quarter_turns(frame)
+    except (av.error.FFmpegError, ServoscopeError):
+        pass  # a damaged stream: its frames' own errors are reported when they are read
+    return 0
+
+
+def quarter_turns(frame) -> int:
+    """Counter-clockwise quarter turns (0–3) that show a decoded frame upright (its display matrix).
+
+    Raises
+    ------
+    ServoscopeError
+        For a rotation that is not a multiple of 90° (no camera writes one).
+    """
+    degrees = frame.rotation
+    if not degrees:
+        return 0
+    if degrees % 90:
+        raise ServoscopeError(f"display rotation of {degrees}° is not a multiple of 90°; servoscope cannot show "
+                              "such a frame upright (re-encode it upright)")
+    return (int(degrees) // 90) % 4
+
+
+def frame_layout(frame) -> YuvLayout | None:
+    """A decoded frame's planar Y'CbCr layout from its pixel format and tags (None for other formats)."""
+    return layout_of_format(frame.format.name, frame.color_range, frame.colorspace)
+
+
+def native_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A planar Y'CbCr frame's three planes as views of its buffers (uint8, or uint16 above 8 bits)."""
+    dtype = np.dtype(np.uint8) if frame.format.components[0].bits <= 8 else np.dtype("<u2")
+    out = []
+    for plane in frame.planes[:3]:
+        buf = np.frombuffer(plane, dtype)
+        stride = plane.line_size // dtype.itemsize
+        out.append(buf[: plane.height * stride].reshape(plane.height, stride)[:, :plane.width])
+    return out[0], out[1], out[2]
+
+
+def _upright(a: np.ndarray, turns: int) -> np.ndarray:
+    return a if not turns else np.ascontiguousarray(np.rot90(a, turns))
+
+
+def frame_rgb(frame) -> np.ndarray:
+    """A decoded frame as upright RGB uint8, by its own tags.
+
+    Untagged 8-bit yuv420p (servoscope's twin) and formats other than
+    planar Y'CbCr go through libswscale as before; every other Y'CbCr
+    layout through :func:`servoscope.video.colour.to_rgb` (the standard
+    equations with the stream's range, matrix and bit depth).
+    """
+    layout = frame_layout(frame)
+    if layout is None or layout.is_writer_default:
+        rgb = frame.to_ndarray(format="rgb24")
+    else:
+        rgb = to_rgb(*native_planes(frame), layout)
+    return _upright(rgb, quarter_turns(frame))
 
 
 #: Accepted values of ``iter_frames(..., fields=)``.
@@ -201,7 +301,7 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
         try:
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
-                rgb = frame.to_ndarray(format="rgb24")
+                rgb = frame_rgb(frame)
                 intra = is_intra(frame)
                 if fields is None:
                     yield Frame(index, time_s, rgb, intra=intra)
@@ -358,21 +458,40 @@ def is_intra(frame) -> bool:
 
 
 def yuv_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A decoded frame's Y, U, V planes as uint8 views of its buffers (no copy).
+    """A decoded frame's Y, U, V planes as 8-bit 4:2:0 limited-range BT.601, upright.
 
-    Frames in another pixel format, or of odd size, are first converted to
-    yuv420p (cropped to even size). The views keep the frame's buffers alive.
+    Untagged (or BT.601-tagged, limited-range) 8-bit yuv420p of even size,
+    unrotated, is returned as uint8 views of the frame's buffers (no copy;
+    the views keep the buffers alive). Other planar Y'CbCr layouts are
+    converted by the standard equations from the frame's own range, matrix
+    and bit depth (:func:`servoscope.video.colour.to_i420_bt601`); other
+    pixel formats (RGB, grey) go through libswscale to yuv420p (cropped to
+    even size). A rotated frame is turned upright (a copy).
     """
-    if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
-        frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
-                               format="yuv420p")
-    w, h = frame.width, frame.height
-    out = []
-    for plane, (pw, ph) in zip(frame.planes, ((w, h), (w // 2, h // 2), (w // 2, h // 2))):
-        # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
-        buf = np.frombuffer(plane, np.uint8)
-        out.append(buf[: ph * plane.line_size].reshape(ph, plane.line_size)[:, :pw])
-    return out[0], out[1], out[2]
+    turns = quarter_turns(frame)
+    layout = frame_layout(frame)
+    if layout is not None and not layout.is_writer_default:
+        y, u, v = _split_i420(to_i420_bt601(*native_planes(frame), layout))
+    else:
+        if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
+            frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
+                                   format="yuv420p")
+        w, h = frame.width, frame.height
+        out = []
+        for plane, (pw, ph) in zip(frame.planes, ((w, h), (w // 2, h // 2), (w // 2, h // 2))):
+            # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
+            buf = np.frombuffer(plane, np.uint8)
+            out.append(buf[: ph * plane.line_size].reshape(ph, plane.line_size)[:, :pw])
+        y, u, v = out
+    if turns:
+        y, u, v = _upright(y, turns), _upright(u, turns), _upright(v, turns)
+    return y, u, v
+
+
+def _split_i420(i420: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    h = i420.shape[0] * 2 // 3
+    chroma = i420[h:].reshape(2, h // 2, i420.shape[1] // 2)
+    return i420[:h], chroma[0], chroma[1]
 
 
 def _decode_into(path: Path, q, stop, threads: int) -> None:

@@ -1,0 +1,250 @@
+"""Y'CbCr ↔ R'G'B' by the standard equations (ITU-R BT.601 / BT.709 / BT.2020, ITU-T H.273).
+
+The trackers' YUV path expects what servoscope's own writer makes: 8-bit
+4:2:0, limited ("TV") range, BT.601 matrix. Cameras also record 10-bit,
+4:2:2, full ("PC"/JPEG) range and BT.709 (every HD camera and phone). This
+module maps any planar Y'CbCr source onto that target exactly, from the
+stream's own tags, and builds such sources from RGB for the writer.
+
+Why not libswscale: its conversions are fixed-point and, depending on the
+path, ignore the source range or matrix; docs/formats.md lists what it gives
+against these equations (up to tens of DN on saturated colours).
+
+Quantisation (H.273, bit depth n): limited range ``Y = 2^(n-8)·(16 + 219·E'Y)``,
+``C = 2^(n-8)·(128 + 224·E'P)``; full range ``Y = (2^n − 1)·E'Y``,
+``C = (2^n − 1)·E'P + 2^(n−1)``. E'P is E'Pb or E'Pr, in [−0.5, 0.5]:
+``E'Pb = (E'B − E'Y) / (2(1 − Kb))``, ``E'Pr = (E'R − E'Y) / (2(1 − Kr))``.
+"""
+
+from __future__ import annotations
+
+import re
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from numba import njit
+
+from ..errors import ServoscopeError
+
+__all__ = ["MATRICES", "YuvLayout", "ycbcr_matrix", "quantisation", "layout_of_format", "matrix_of_colorspace",
+           "encode_ycbcr", "to_i420_bt601", "to_rgb"]
+
+#: Matrix name → (Kr, Kb) luma coefficients.
+MATRICES: dict[str, tuple[float, float]] = {
+    "bt601": (0.299, 0.114),     # BT.601 / BT.470BG / SMPTE 170M: SD, and the unlabelled default
+    "bt709": (0.2126, 0.0722),   # BT.709: HD cameras and phones
+    "bt2020": (0.2627, 0.0593),  # BT.2020 non-constant luminance: HDR phones
+    "smpte240m": (0.212, 0.087),
+    "fcc": (0.30, 0.11),
+}
+
+#: FFmpeg's AVColorSpace → matrix name (unspecified, 2, reads as BT.601, FFmpeg's own default).
+_COLORSPACES = {1: "bt709", 2: "bt601", 4: "fcc", 5: "bt601", 6: "bt601", 7: "smpte240m", 9: "bt2020", 10: "bt2020"}
+
+#: Matrix name → the AVColorSpace the writer tags (BT.601 as SMPTE 170M, what cameras write).
+COLORSPACE_CODES = {"bt601": 6, "bt709": 1, "bt2020": 9, "smpte240m": 7, "fcc": 4}
+
+_PLANAR = re.compile(r"^yuv(j?)(420|422|444|440|411|410)p(?:(9|10|12|14|16)le)?$")
+#: Chroma subsampling name → (horizontal, vertical) factors.
+_SUBSAMPLING = {"420": (2, 2), "422": (2, 1), "444": (1, 1), "440": (1, 2), "411": (4, 1), "410": (4, 4)}
+_SUBSAMPLING_NAME = {"420": "4:2:0", "422": "4:2:2", "444": "4:4:4", "440": "4:4:0", "411": "4:1:1", "410": "4:1:0"}
+
+
+def ycbcr_matrix(matrix: str) -> np.ndarray:
+    """The 3×3 matrix taking (E'R, E'G, E'B) to (E'Y, E'Pb, E'Pr) for a named matrix."""
+    try:
+        kr, kb = MATRICES[matrix]
+    except KeyError:
+        raise ServoscopeError(f"unknown colour matrix {matrix!r} (choose from {sorted(MATRICES)})") from None
+    kg = 1.0 - kr - kb
+    return np.array([[kr, kg, kb],
+                     [-kr / (2 * (1 - kb)), -kg / (2 * (1 - kb)), 0.5],
+                     [0.5, -kg / (2 * (1 - kr)), -kb / (2 * (1 - kr))]])
+
+
+def quantisation(bit_depth: int, full_range: bool) -> tuple[float, float, float, float]:
+    """``(y_offset, y_scale, c_offset, c_scale)``: code value = offset + scale·E'."""
+    if full_range:
+        top = float(2 ** bit_depth - 1)
+        return 0.0, top, float(2 ** (bit_depth - 1)), top
+    k = float(2 ** (bit_depth - 8))
+    return 16.0 * k, 219.0 * k, 128.0 * k, 224.0 * k
+
+
+def matrix_of_colorspace(code: int) -> str:
+    """Matrix name of an FFmpeg AVColorSpace code (unknown or unspecified: BT.601)."""
+    return _COLORSPACES.get(int(code), "bt601")
+
+
+@dataclass(frozen=True)
+class YuvLayout:
+    """How a planar Y'CbCr picture is coded.
+
+    Attributes
+    ----------
+    bit_depth : int
+    subsampling : str
+        e.g. ``"4:2:0"``.
+    factors : (int, int)
+        Chroma subsampling, horizontal and vertical (2, 2 for 4:2:0).
+    full_range : bool
+        Full ("PC", JPEG) range rather than limited ("TV").
+    matrix : str
+        A key of :data:`MATRICES`.
+    """
+
+    bit_depth: int
+    subsampling: str
+    factors: tuple[int, int]
+    full_range: bool
+    matrix: str
+
+    @property
+    def is_writer_default(self) -> bool:
+        """8-bit 4:2:0 limited-range BT.601: what the trackers take as it is."""
+        return self.bit_depth == 8 and self.factors == (2, 2) and not self.full_range and self.matrix == "bt601"
+
+
+def layout_of_format(pix_fmt: str, color_range: int, colorspace: int) -> YuvLayout | None:
+    """The layout of a planar Y'CbCr pixel format with its tags, or None for other formats.
+
+    Parameters
+    ----------
+    pix_fmt : str
+        FFmpeg pixel format name, e.g. ``"yuv422p10le"``; the ``yuvj`` formats
+        are full range whatever the range tag says.
+    color_range : int
+        AVColorRange: 2 (JPEG) full, anything else limited (FFmpeg's reading of unspecified).
+    colorspace : int
+        AVColorSpace (see :func:`matrix_of_colorspace`).
+    """
+    m = _PLANAR.match(pix_fmt or "")
+    if m is None:
+        return None
+    bits = int(m.group(3) or 8)
+    return YuvLayout(bits, _SUBSAMPLING_NAME[m.group(2)], _SUBSAMPLING[m.group(2)],
+                     bool(m.group(1)) or int(color_range) == 2, matrix_of_colorspace(colorspace))
+
+
+def encode_ycbcr(rgb: np.ndarray, *, matrix: str = "bt601", full_range: bool = False, bit_depth: int = 8,
+                 factors: tuple[int, int] = (2, 2)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RGB (uint8, full-scale 0–255 = E' 0–1) → Y, Cb, Cr code-value planes.
+
+    Chroma is the mean of each ``factors`` block of the full-resolution E'Pb,
+    E'Pr (centre-sited, as the writer's 8-bit path); values are rounded half
+    up and clipped to the code range.
+
+    Returns
+    -------
+    y, cb, cr : ndarray of uint8 (8-bit) or uint16
+    """
+    e = np.asarray(rgb, dtype=np.float64) / 255.0
+    ypp = e @ ycbcr_matrix(matrix).T
+    h, w = e.shape[:2]
+    fx, fy = factors
+    if h % fy or w % fx:
+        raise ServoscopeError(f"frame size {w}x{h} is not a multiple of the chroma subsampling {fx}x{fy}")
+    chroma = ypp[..., 1:].reshape(h // fy, fy, w // fx, fx, 2).mean(axis=(1, 3))
+    yo, ys, co, cs = quantisation(bit_depth, full_range)
+    top = 2 ** bit_depth - 1
+    dtype = np.uint8 if bit_depth == 8 else np.uint16
+    y = np.clip(np.floor(yo + ys * ypp[..., 0] + 0.5), 0, top).astype(dtype)
+    c = np.clip(np.floor(co + cs * chroma + 0.5), 0, top).astype(dtype)
+    return y, np.ascontiguousarray(c[..., 0]), np.ascontiguousarray(c[..., 1])
+
+
+@njit(cache=True)
+def _to_i420(y, u, v, fx, fy, q, m, out):
+    # q: source (y_off, y_scale, c_off, c_scale); m: source E'YPbPr -> BT.601 E'YPbPr.
+    h, w = out.shape[0] * 2 // 3, out.shape[1]
+    hw, ww = h // 2, w // 2
+    cb_off = h * w
+    cr_off = cb_off + hw * ww
+    flat = out.ravel()
+    for by in range(hw):
+        for bx in range(ww):
+            pbs = 0.0
+            prs = 0.0
+            for dy in range(2):
+                yy = 2 * by + dy
+                for dx in range(2):
+                    xx = 2 * bx + dx
+                    e_y = (y[yy, xx] - q[0]) / q[1]
+                    pb = (u[yy // fy, xx // fx] - q[2]) / q[3]
+                    pr = (v[yy // fy, xx // fx] - q[2]) / q[3]
+                    ly = m[0, 0] * e_y + m[0, 1] * pb + m[0, 2] * pr
+                    pbs += m[1, 0] * e_y + m[1, 1] * pb + m[1, 2] * pr
+                    prs += m[2, 0] * e_y + m[2, 1] * pb + m[2, 2] * pr
+                    val = np.floor(16.0 + 219.0 * ly + 0.5)
+                    flat[yy * w + xx] = np.uint8(min(255.0, max(0.0, val)))
+            cb = np.floor(128.0 + 224.0 * 0.25 * pbs + 0.5)
+            cr = np.floor(128.0 + 224.0 * 0.25 * prs + 0.5)
+            flat[cb_off + by * ww + bx] = np.uint8(min(255.0, max(0.0, cb)))
+            flat[cr_off + by * ww + bx] = np.uint8(min(255.0, max(0.0, cr)))
+
+
+@njit(cache=True)
+def _to_rgb(y, u, v, fx, fy, q, minv, out):
+    h, w = out.shape[0], out.shape[1]
+    for yy in range(h):
+        for xx in range(w):
+            e_y = (y[yy, xx] - q[0]) / q[1]
+            pb = (u[yy // fy, xx // fx] - q[2]) / q[3]
+            pr = (v[yy // fy, xx // fx] - q[2]) / q[3]
+            for k in range(3):
+                val = np.floor(255.0 * (minv[k, 0] * e_y + minv[k, 1] * pb + minv[k, 2] * pr) + 0.5)
+                out[yy, xx, k] = np.uint8(min(255.0, max(0.0, val)))
+
+
+def _check_planes(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout) -> tuple[int, int]:
+    fx, fy = layout.factors
+    h, w = y.shape
+    if u.shape != v.shape or u.shape[0] * fy < h or u.shape[1] * fx < w:
+        raise ServoscopeError(f"chroma planes {u.shape} do not cover a {w}x{h} {layout.subsampling} picture")
+    return h - h % 2, w - w % 2
+
+
+def to_i420_bt601(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout) -> np.ndarray:
+    """Any planar Y'CbCr picture → 8-bit 4:2:0 limited-range BT.601, exactly by the standard equations.
+
+    Each pixel is decoded with its own chroma sample (nearest; a 4:2:2
+    sample serves the two pixels it covers), re-expressed in BT.601's
+    E'Y, E'Pb, E'Pr, then the output chroma is the mean over each 2×2 block
+    (centre-sited, as servoscope's writer), rounded half up. Odd sizes lose
+    their last row/column.
+
+    Parameters
+    ----------
+    y, u, v : ndarray of uint8 or uint16
+        The picture's planes (strided views allowed).
+    layout : YuvLayout
+
+    Returns
+    -------
+    ndarray of uint8, shape (h·3/2, w)
+        I420: Y plane, then Cb, then Cr (PyAV's yuv420p layout).
+    """
+    h, w = _check_planes(y, u, v, layout)
+    m = ycbcr_matrix("bt601") @ np.linalg.inv(ycbcr_matrix(layout.matrix))
+    q = np.array(quantisation(layout.bit_depth, layout.full_range))
+    out = np.empty((h * 3 // 2, w), np.uint8)
+    fx, fy = layout.factors
+    _to_i420(y, u, v, fx, fy, q, m, out)
+    return out
+
+
+def to_rgb(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout) -> np.ndarray:
+    """Any planar Y'CbCr picture → RGB uint8 (0–255 = E' 0–1), by the standard equations.
+
+    Each pixel takes its nearest chroma sample; values are rounded half up
+    and clipped. Odd sizes lose their last row/column.
+    """
+    h, w = _check_planes(y, u, v, layout)
+    minv = np.linalg.inv(ycbcr_matrix(layout.matrix))
+    q = np.array(quantisation(layout.bit_depth, layout.full_range))
+    out = np.empty((h, w, 3), np.uint8)
+    fx, fy = layout.factors
+    _to_rgb(y, u, v, fx, fy, q, minv, out)
+    return out
