@@ -19,6 +19,7 @@ from servoscope.markers import TrackerSettings, track_video
 from servoscope.simulate import Scene
 from servoscope.simulate.render import FrameRenderer
 from servoscope.simulate.scene import marker_angle_rad
+from servoscope.video.colour import layout_of_format, to_i420_bt601, to_rgb
 from servoscope.video.reader import iter_frames, iter_yuv_frames, probe_video
 from servoscope.video.writer import VideoWriter
 
@@ -67,6 +68,49 @@ def _bt601_tv(rgb: np.ndarray) -> np.ndarray:
     r, g, b = rgb / 255.0
     y = 0.299 * r + 0.587 * g + 0.114 * b
     return np.array([16 + 219 * y, 128 + 224 * (b - y) / 1.772, 128 + 224 * (r - y) / 1.402])
+
+
+@pytest.mark.parametrize("pix_fmt,color_range,colorspace", [
+    ("yuv420p", 2, 1), ("yuv422p10le", 1, 1), ("yuv422p10le", 2, 5), ("yuv444p", 1, 9), ("yuvj420p", 0, 2),
+])
+def test_conversion_is_the_standard_equations(pix_fmt, color_range, colorspace):
+    # Random code values straight into the converter (no codec): every output sample is the
+    # float64 oracle's value, rounded (float32 arithmetic inside: 1e-3 DN of slack).
+    layout = layout_of_format(pix_fmt, color_range, colorspace)
+    fx, fy = layout.factors
+    n = layout.bit_depth
+    rng = np.random.default_rng(7)
+    h, w = 34, 46
+    y = rng.integers(0, 2 ** n, (h, w)).astype(np.uint8 if n == 8 else np.uint16)
+    u = rng.integers(0, 2 ** n, (h // fy, w // fx)).astype(y.dtype)
+    v = rng.integers(0, 2 ** n, (h // fy, w // fx)).astype(y.dtype)
+    kr, kb = {1: (0.2126, 0.0722), 9: (0.2627, 0.0593)}.get(colorspace, (0.299, 0.114))
+    full = layout.full_range
+    top = 2 ** n - 1
+    sy = top if full else 219 * 2 ** (n - 8)
+    sc = top if full else 224 * 2 ** (n - 8)
+    yf, uf, vf = (a.astype(np.float64) for a in (y, u, v))
+    e_y = (yf - (0 if full else 16 * 2 ** (n - 8))) / sy
+    centre = 2 ** (n - 1)
+    pb = np.repeat(np.repeat((uf - centre) / sc, fy, 0), fx, 1)
+    pr = np.repeat(np.repeat((vf - centre) / sc, fy, 0), fx, 1)
+    r = e_y + 2 * (1 - kr) * pr
+    b = e_y + 2 * (1 - kb) * pb
+    g = (e_y - kr * r - kb * b) / (1 - kr - kb)
+    want_rgb = np.stack([r, g, b], -1) * 255
+    got_rgb = to_rgb(y, u, v, layout)
+    exact = np.clip(want_rgb, 0, 255)
+    assert np.abs(got_rgb - exact).max() <= 0.5 + 1e-3
+    # BT.601 limited range of the same R'G'B', chroma the mean of each 2×2 block.
+    y601 = 0.299 * r + 0.587 * g + 0.114 * b
+    want = [16 + 219 * y601, 128 + 224 * (b - y601) / 1.772, 128 + 224 * (r - y601) / 1.402]
+    i420 = to_i420_bt601(y, u, v, layout)
+    got_y = i420[:h]
+    chroma = i420[h:].reshape(2, h // 2, w // 2)
+    assert np.abs(got_y - np.clip(want[0], 0, 255)).max() <= 0.5 + 1e-3
+    for k in (1, 2):
+        block = want[k].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
+        assert np.abs(chroma[k - 1] - np.clip(block, 0, 255)).max() <= 0.5 + 1e-3
 
 
 def _write(path, frames, **kw) -> list[float]:
