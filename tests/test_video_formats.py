@@ -239,6 +239,26 @@ def test_rotation_metadata_gives_upright_frames(tmp_path, rotation, codec, pix_f
     assert np.abs(turned.astype(int) - rgb).mean() < 2.0
 
 
+def test_a_rotation_no_camera_writes_is_one_clear_error(tmp_path):
+    path = tmp_path / "tilted.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=100)
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        stream.set_display_rotation(45)
+        for i in range(3):
+            frame = av.VideoFrame.from_ndarray(np.zeros((72, 64), np.uint8), format="yuv420p")
+            frame.pts = i
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+    for read in (probe_video, lambda p: list(iter_frames(p)), lambda p: list(iter_yuv_frames(p))):
+        with pytest.raises(ServoscopeError) as info:
+            read(path)
+        message = str(info.value)
+        assert message.startswith(str(path)) and "45" in message and "\n" not in message
+
+
 @pytest.mark.parametrize("codec", ["h264", "hevc"])
 def test_variable_frame_rate_times_come_back_as_written(tmp_path, codec):
     _needs(codec)

@@ -175,7 +175,7 @@ def probe_video(path: str | Path) -> VideoInfo:
             duration = container.duration / 1e6
         pix_fmt = ctx.format.name if ctx.format is not None else None
         layout = layout_of_format(pix_fmt or "", ctx.color_range, ctx.colorspace)
-        turns = _first_frame_turns(container, stream)
+        turns = _first_frame_turns(path, container, stream)
         width, height = (int(ctx.height), int(ctx.width)) if turns % 2 else (int(ctx.width), int(ctx.height))
         return VideoInfo(
             path=path,
@@ -196,14 +196,22 @@ def probe_video(path: str | Path) -> VideoInfo:
         container.close()
 
 
-def _first_frame_turns(container, stream) -> int:
+def _first_frame_turns(path: Path, container, stream) -> int:
     """Quarter turns of the first frame (the display matrix reaches PyAV on decoded frames only)."""
     try:
         for frame in container.decode(stream):
-            return quarter_turns(frame)
-    except (av.error.FFmpegError, ServoscopeError):
+            return _in_file(path, quarter_turns, frame)
+    except av.error.FFmpegError:
         pass  # a damaged stream: its frames' own errors are reported when they are read
     return 0
+
+
+def _in_file(path: Path, convert, frame):
+    """``convert(frame)``, its errors naming the file."""
+    try:
+        return convert(frame)
+    except ServoscopeError as exc:
+        raise ServoscopeError(f"{path}: {exc}") from None
 
 
 def quarter_turns(frame) -> int:
@@ -301,7 +309,7 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
         try:
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
-                rgb = frame_rgb(frame)
+                rgb = _in_file(path, frame_rgb, frame)
                 intra = is_intra(frame)
                 if fields is None:
                     yield Frame(index, time_s, rgb, intra=intra)
@@ -523,7 +531,7 @@ def _decode_into(path: Path, q, stop, threads: int) -> None:
         try:
             for frame in container.decode(stream):
                 time_s = last_time = _frame_time_s(frame, time_base, rate, last_time)
-                if not put((time_s, yuv_planes(frame), rate_hz, is_intra(frame))):
+                if not put((time_s, _in_file(path, yuv_planes, frame), rate_hz, is_intra(frame))):
                     return
                 n += 1
         except av.error.FFmpegError as exc:
