@@ -27,7 +27,7 @@ import numpy as np
 
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
-from ..video.reader import iter_frames, iter_yuv_frames, probe_video, thread_budget
+from ..video.reader import VideoInfo, iter_frames, iter_yuv_frames, probe_video, thread_budget
 from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
 from .moments import Moments, weighted_moments
@@ -800,8 +800,9 @@ def track_video(
 
     valid = np.array([r == "" for r in reasons], dtype=bool)
     # A rolling shutter exposes the rows of the *recorded* image in turn: keep
-    # the recorded rows before undistortion replaces the centroids.
-    lead_row, trail_row = lead_arr[:, 1].copy(), trail_arr[:, 1].copy()
+    # the recorded rows before undistortion replaces the centroids (the stored
+    # picture's rows: a phone's 90° rotation makes them the upright image's columns).
+    lead_row, trail_row = info.sensor_rows(lead_arr), info.sensor_rows(trail_arr)
     if settings.camera is not None:
         for arr, name in ((lead_arr, "lead"), (trail_arr, "trail")):
             good = np.isfinite(arr[:, 0])
@@ -834,7 +835,7 @@ def track_video(
         if np.isfinite(row).any():
             # Frames without both markers have no angle; give them the typical row.
             row = np.where(np.isfinite(row), row, np.nanmedian(row))
-            angle_time = angle_time + settings.readout_s * row / info.height
+            angle_time = angle_time + settings.readout_s * row / info.sensor_height
     invalid = n - int(valid.sum())
     if n and not valid.any():
         warnings.append("no frame has both markers")
@@ -875,12 +876,12 @@ def track_video(
                 # The LED's rows are exposed readout·y/H after the frame time. Its
                 # position before the input starts is where it switched (the
                 # blade is at rest until then); the first clean frame shows it.
-                led_row = _led_row_px(snapshot, led_spec) if snapshot is not None else None
+                led_row = _led_row_px(snapshot, led_spec, info) if snapshot is not None else None
                 if led_row is None:
                     warnings.append("rolling shutter: LED not found in the reference frame; "
                                     "t0 not corrected for the LED's row")
                 else:
-                    t0 = t0 + settings.readout_s * led_row / info.height
+                    t0 = t0 + settings.readout_s * led_row / info.sensor_height
         else:
             warnings.append("LED brightness does not change: no input start (t0) found")
 
@@ -970,8 +971,8 @@ def _angle_row_weights(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: n
     return w, ""
 
 
-def _led_row_px(rgb: np.ndarray, led_spec) -> float | None:
-    """Row (recorded image, px) of the largest lit-LED-coloured blob in ``rgb``; None when there is none."""
+def _led_row_px(rgb: np.ndarray, led_spec, info: VideoInfo) -> float | None:
+    """Row (stored picture, px) of the largest lit-LED-coloured blob in ``rgb``; None when there is none."""
     model = ColourModel.from_seed(led_spec)
     mask = model.mask(rgb).astype(np.uint8)
     n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
@@ -980,7 +981,7 @@ def _led_row_px(rgb: np.ndarray, led_spec) -> float | None:
     best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     if stats[best, cv2.CC_STAT_AREA] < 3:
         return None
-    return float(cents[best][1])
+    return float(info.sensor_rows(cents[best]))
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")

@@ -80,6 +80,38 @@ class VideoInfo:
     matrix: str | None = "bt601"
     rotation_deg: int = 0
 
+    @property
+    def sensor_height(self) -> int:
+        """Rows of the picture as stored (the sensor's rows, which a rolling shutter reads in turn)."""
+        return self.width if self.rotation_deg % 180 else self.height
+
+    def sensor_rows(self, xy_px: np.ndarray) -> np.ndarray:
+        """Row of the stored picture (px, pixel centres at integers) of upright image points.
+
+        A rolling shutter exposes the stored picture's rows in turn; a phone's
+        90° rotation makes them the upright image's columns.
+
+        Parameters
+        ----------
+        xy_px : array_like, shape (..., 2)
+            Points in the upright image (as the frames come), px.
+
+        Returns
+        -------
+        ndarray, shape (...)
+        """
+        xy = np.asarray(xy_px, dtype=np.float64)
+        x, y = xy[..., 0], xy[..., 1]
+        # np.rot90(stored, k) shows the stored picture upright; invert it for each k.
+        turns = (self.rotation_deg // 90) % 4
+        if turns == 0:
+            return y.copy()
+        if turns == 1:
+            return x.copy()
+        if turns == 2:
+            return (self.height - 1) - y
+        return (self.width - 1) - x
+
 
 @dataclass(frozen=True)
 class Frame:
