@@ -242,3 +242,68 @@ def test_yellow_led_beside_an_orange_sticker_is_found(tmp_path):
     tr = track_video(tmp_path / "led.mp4", TrackerSettings("#ff7f0e", "#9467bd", "#ffd400"))
     assert tr.valid.all() and not tr.warnings
     assert tr.t0_s == pytest.approx(0.40 - 0.005 + 0.3 * 0.01, abs=3 * tr.t0_uncertainty_s + 1e-4)
+
+
+# -- 3. stickers that are not discs ------------------------------------------------------------
+def _shaped_clip(path: Path, half_u: float, half_v: float, n: int = 120, fps: float = 200.0) -> np.ndarray:
+    """The twin's blade with rectangular stickers (exact area coverage) turning with it; the true angle."""
+    from servoscope.simulate.render import polygon_coverage
+    from servoscope.simulate.scene import colour_rgb
+
+    # The twin's own stickers shrunk to a 1 px dot, under the rectangle drawn over it.
+    scene = Scene.for_size(W, H, background_seed=1, sticker_diameter_px=1.0)
+    pitch = 0.05 * np.sin(2 * np.pi * 1.5 * np.arange(n) / fps)
+    renderer = FrameRenderer(scene, noise_sigma_dn=1.5, noise_seed=0)
+    lead, trail = scene.sticker_centres_px(pitch)
+    truth = marker_angle_rad(lead, trail)
+    with VideoWriter(path, W, H, fps, codec="h264", bit_rate=20_000_000) as writer:
+        for i in range(n):
+            f = renderer.render(float(pitch[i]), 1.0, i)
+            e = np.array([math.cos(truth[i]), -math.sin(truth[i])])  # along the markers' line (y down)
+            nrm = np.array([-e[1], e[0]])
+            for c, colour in ((lead[i], scene.lead_colour), (trail[i], scene.trail_colour)):
+                pts = np.array([c + su * half_u * e + sv * half_v * nrm for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+                cov, x0, y0 = polygon_coverage(pts, (W, H))
+                region = f[y0:y0 + cov.shape[0], x0:x0 + cov.shape[1]].astype(np.float64)
+                region += cov[..., None] * (colour_rgb(colour) - region)
+                f[y0:y0 + cov.shape[0], x0:x0 + cov.shape[1]] = np.clip(np.round(region), 0, 255).astype(np.uint8)
+            writer.write(f)
+    return truth
+
+
+@pytest.mark.parametrize("shape, half_u, half_v", [("square", 7.65, 7.65), ("strip", 17.0, 5.1)])
+def test_square_and_strip_stickers_track(tmp_path, shape, half_u, half_v):
+    """Rectangles turning with the blade: measured with a support that follows their outline.
+
+    With the round support a strip's support took in the blade's edge beside it: 0.196° RMS
+    (the square: 0.0112°); with the rectangle's, 0.0088° (0.0087°), every frame valid.
+    """
+    truth = _shaped_clip(tmp_path / f"{shape}.mp4", half_u, half_v)
+    tr = track_video(tmp_path / f"{shape}.mp4", TrackerSettings(led=None))
+    assert tr.valid.all(), set(tr.reason)
+    assert _rms_deg(tr, truth) < 0.01
+
+
+@pytest.mark.parametrize("fields", [(0, 1), (1, 2)])
+def test_rectangle_support_numpy_and_numba_agree(fields):
+    from servoscope.markers import kernels as K
+    from test_kernels import _frame, _params, _run
+
+    i420 = _frame(1)
+    params = _params(i420)
+    params[:, K.P.RECT] = 1.0
+    params[:, K.P.HALF_U], params[:, K.P.HALF_V] = (9.0, 8.0), (6.0, 5.0)
+    params[:, K.P.COS], params[:, K.P.SIN] = math.cos(0.4), math.sin(0.4)
+    params[:, K.P.RECT_MARGIN] = 2.0
+    params[:, K.P.RADIUS] = np.hypot(params[:, K.P.HALF_U], params[:, K.P.HALF_V]) + 2.0
+    if fields[1] == 2:
+        params[:, K.P.Y0] //= 2
+        params[:, K.P.Y1] //= 2
+    led = np.array([1.0, 0.3, -0.05, 4.0])
+    a, _ = _run("numpy", i420, params, led, *fields)
+    b, _ = _run("numba", i420, params, led, *fields)
+    assert a[:, K.Q.M00].min() > 10
+    np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9)
+    # The rectangles contain the test's disks (radii 9 and 8 px): the same centroids as the round support.
+    disk, _ = _run("numba", i420, _params(i420), led, *fields)
+    np.testing.assert_allclose(b[:, [K.Q.X, K.Q.Y]], disk[:, [K.Q.X, K.Q.Y]], atol=0.05)

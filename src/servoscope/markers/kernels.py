@@ -94,9 +94,14 @@ class P:
     MIN_DEN = 21  # least w_Y·c_Y² + |c_C|² for unmixing (DN²); below: the class flag
     CX, CY = 22, 23  # centre to use when USE_CENTRE (else the class's centroid)
     USE_CENTRE = 24
+    # A rectangular sticker (a square, a tape strip): support and ring follow its outline, a
+    # rectangle of half-sides HALF_U × HALF_V whose U axis points along (COS, SIN) in the image
+    # (x right, frame rows down), grown by RECT_MARGIN px with round corners; the ring lies
+    # 1 to 1 + RING px beyond that. RECT = 0: the disk of RADIUS (round stickers).
+    RECT, HALF_U, HALF_V, COS, SIN, RECT_MARGIN = 25, 26, 27, 28, 29, 30
 
 
-NP = 25
+NP = 31
 
 
 class Q:
@@ -267,7 +272,7 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
         py = gy.ravel().astype(np.float64)
         dx, dy = px - cx, py - cy
         dym = dy * row_step  # distances in frame rows: a field's disk is an ellipse
-        d2 = dx * dx + dym * dym
+        d2 = _support_d2_np(prm, dx, dym, radius)
         pY = Y[ay0:ay1, ax0:ax1].ravel().astype(np.float64)
         ring = (d2 >= (radius + 1.0) ** 2) & (d2 <= outer * outer)
         rU = _chroma_np(U, px[ring], py[ring], row_off, row_step)
@@ -337,6 +342,18 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
         out[Q.VAR_Y] = (var_a * ey * ey).sum() / (m00 * m00)
         out[Q.CONTRAST] = math.sqrt(c2 / sdx.size) if sdx.size else 0.0
         cx, cy = out[Q.X], out[Q.Y]
+
+
+def _support_d2_np(prm, dx, dym, radius):
+    """Squared "radius" of each pixel for the support and ring tests (see :func:`_support_d2`)."""
+    if prm[P.RECT] == 0.0:
+        return dx * dx + dym * dym
+    u = dx * prm[P.COS] + dym * prm[P.SIN]
+    v = dym * prm[P.COS] - dx * prm[P.SIN]
+    du = np.maximum(np.abs(u) - prm[P.HALF_U], 0.0)
+    dv = np.maximum(np.abs(v) - prm[P.HALF_V], 0.0)
+    e = radius - prm[P.RECT_MARGIN] + np.sqrt(du * du + dv * dv)
+    return e * e
 
 
 def _luma_alpha_at_chroma_res_np(prm, pY, px, py, dx, dym, d2, radius, my, row_off, row_step, chroma_shape,
@@ -500,6 +517,25 @@ def _block_bilinear(gs, gm, gi0, gj0, x, y, row_off, row_step, hc, wc, own):
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
+def _support_d2(rect, hu, hv, cs, sn, sm, radius, dx, dym):
+    """Squared "radius" of a pixel at (dx, dym) from the centre, for the support and ring tests.
+
+    A disk (``rect`` False): dx² + dym². A rectangle of half-sides (hu, hv) along (cs, sn):
+    ``(radius − sm + d)²`` with d the pixel's distance from the rectangle (0 inside), so that
+    ``d2 <= radius²`` is "within sm of the rectangle" and the disk's ring test
+    ``(radius + 1)² <= d2 <= (radius + 1 + ring)²`` is "1 to 1 + ring px beyond that".
+    """
+    if not rect:
+        return dx * dx + dym * dym
+    u = dx * cs + dym * sn
+    v = dym * cs - dx * sn
+    du = max(abs(u) - hu, 0.0)
+    dv = max(abs(v) - hv, 0.0)
+    e = radius - sm + math.sqrt(du * du + dv * dv)
+    return e * e
+
+
+@njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _is_class(prm, uv, vv):
     u = uv - 128.0
     v = vv - 128.0
@@ -571,6 +607,8 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
     r_out2 = outer * outer
     r2 = radius * radius
     wy = prm[14]
+    rect = prm[25] != 0.0
+    hu, hv, cs, sn, sm = prm[26], prm[27], prm[28], prm[29], prm[30]
     scale = N_BINS / (2.0 * math.pi)
     cnt = np.zeros(N_BINS)
     bsy = np.zeros(N_BINS)
@@ -608,7 +646,7 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
             for x in range(ax0, ax1):
                 fx = float(x)
                 dx = fx - cx
-                d2 = dx * dx + dym * dym
+                d2 = _support_d2(rect, hu, hv, cs, sn, sm, radius, dx, dym)
                 if d2 <= r2:
                     buf[ns, 0] = dx
                     buf[ns, 1] = dy
@@ -665,7 +703,7 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
                 gj = (row_off + row_step * y) // 2 - gj0
                 for x in range(ax0, ax1):
                     dx = float(x) - cx
-                    d2 = dx * dx + dym * dym
+                    d2 = _support_d2(rect, hu, hv, cs, sn, sm, radius, dx, dym)
                     if d2 > rf2:
                         continue
                     t = (_atan2(dym, dx) + math.pi) * scale - 0.5

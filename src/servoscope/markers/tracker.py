@@ -352,6 +352,8 @@ class _MarkerTracker:
         # Where the first detection found this marker (see markers.selection): before the first
         # accepted position, the blob nearest to it is taken, not the largest of the colour.
         self.hint: tuple[float, float] | None = None
+        # The sticker's perimeter over that of a disk of its area: edge effects scale with it.
+        self.edge_factor = 1.0
 
     # -- detection ---------------------------------------------------------
     def _components(self, rgb: np.ndarray, window: tuple[int, int, int, int]):
@@ -451,7 +453,7 @@ class _MarkerTracker:
         # Edge effects (noise, codec, pixel phase) change the area in
         # proportion to perimeter / area ∝ 1 / radius: the tolerance is for a
         # 13 px radius sticker and grows for smaller ones.
-        tol = self.tolerance * max(1.0, 13.0 / math.sqrt(m00 / math.pi))
+        tol = self.tolerance * max(1.0, 13.0 / math.sqrt(m00 / math.pi)) * self.edge_factor
         area_ratio = soft.moments.m00 / m00
         if area_ratio < 1.0 - tol:
             return f"{self.name} marker partly hidden (area {100 * area_ratio:.0f} % of its reference)"
@@ -1257,11 +1259,87 @@ def _chroma_angle(uv: np.ndarray) -> np.ndarray:
 
 
 class _YuvState:
-    """A marker's YUV model: its kernel parameter row and class area."""
+    """A marker's YUV model: its kernel parameter row and class area.
+
+    ``phi0`` is a rectangular sticker's long-side direction (rad, image
+    coordinates) at the first frame, where the markers' line had direction
+    ``beta0``; None for a round sticker.
+    """
 
     def __init__(self) -> None:
         self.prm = np.zeros(K.NP)
         self.class_area: float | None = None
+        self.phi0: float | None = None
+        self.beta0 = 0.0
+
+
+#: A sticker whose binary blob fills at least this fraction of its minimum-area bounding
+#: rectangle is rectangular (a square, a tape strip): its support follows that rectangle. A
+#: disk fills π/4 = 0.785 of its square (0.74–0.82 measured on pixelated 17–26 px disks, H.264).
+RECT_FILL = 0.86
+#: ...or at least this fraction with a half-length under this many second-moment σ along its long
+#: axis (a rectangle √3 = 1.73, 1.81–1.84 measured; a disk 2, 1.91–2.05 measured).
+RECT_FILL_ELONGATED = 0.83
+RECT_SIGMA_RATIO = 1.86
+#: Support beyond a rectangular sticker's outline (px), as a round sticker's reaches ~2 px beyond
+#: its edge: the edge blur and the codec's chroma smear fit inside.
+RECT_SUPPORT_PX = 2.0
+
+
+def _learn_rect(tracker: _MarkerTracker, frame, m: Moments) -> None:
+    """Decide whether the found sticker is rectangular; if so, set its kernel row's rectangle."""
+    st = tracker.yuv
+    if frame.row_step != 1 or tracker.model is None:
+        return  # fields: a rectangle in field rows is sheared; round support as before
+    rgb = frame.rgb
+    h, w = rgb.shape[:2]
+    r = float(tracker.reach_px or tracker.extent_px) + 2.0
+    x0, x1 = int(max(0, math.floor(m.x_px - r))), int(min(w, math.ceil(m.x_px + r) + 1))
+    y0, y1 = int(max(0, math.floor(m.y_px - r))), int(min(h, math.ceil(m.y_px + r) + 1))
+    mask = tracker.model.mask(rgb[y0:y1, x0:x1]).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return
+    lab = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    ys, xs = np.nonzero(labels == lab)
+    if xs.size < 12:
+        return
+    pts = np.c_[xs + x0, ys + y0].astype(np.float32)
+    (cx, cy), (rw, rh), _ = cv2.minAreaRect(pts)
+    # minAreaRect spans pixel centres: a pixel more each way reaches their edges.
+    fill = xs.size / ((rw + 1.0) * (rh + 1.0))
+    major_ratio = 0.5 * (max(rw, rh) + 1.0) / max(m.axes_px[0], 1e-9)
+    # A rectangle's half-side is √3 its second-moment σ, a disk's or an ellipse's radius 2σ.
+    if not (fill >= RECT_FILL or (fill >= RECT_FILL_ELONGATED and major_ratio <= RECT_SIGMA_RATIO)):
+        return
+    corners = cv2.boxPoints(((cx, cy), (rw, rh), _))
+    side_a, side_b = corners[1] - corners[0], corners[2] - corners[1]
+    long_side = side_a if np.hypot(*side_a) >= np.hypot(*side_b) else side_b
+    # The half-sides from the soft second moments (a rectangle's half-side is √3 σ), not the binary
+    # extents: those grow with the edge blur and the chroma smear, and a support that reaches
+    # further takes in background the ring does not describe (a blade's edge beside a strip).
+    a, b = m.axes_px
+    hu, hv = math.sqrt(3.0) * a, math.sqrt(3.0) * b
+    prm = st.prm
+    prm[K.P.RECT] = 1.0
+    prm[K.P.HALF_U], prm[K.P.HALF_V] = hu, hv
+    prm[K.P.RECT_MARGIN] = RECT_SUPPORT_PX
+    prm[K.P.RADIUS] = math.hypot(hu, hv) + RECT_SUPPORT_PX
+    st.phi0 = math.atan2(float(long_side[1]), float(long_side[0]))
+    tracker.edge_factor = (hu + hv) / math.sqrt(math.pi * hu * hv)
+    _orient(prm, st.phi0)
+
+
+def _orient(prm: np.ndarray, phi: float) -> None:
+    prm[K.P.COS], prm[K.P.SIN] = math.cos(phi), math.sin(phi)
+
+
+def _line_direction(lead: _MarkerTracker, trail: _MarkerTracker) -> float | None:
+    """Direction (rad, image coordinates) from the trail marker's predicted position to the lead's."""
+    a, b = lead.predicted_xy(), trail.predicted_xy()
+    if a is None or b is None:
+        return None
+    return math.atan2(a[1] - b[1], a[0] - b[0])
 
 
 def _learn_yuv(tracker: _MarkerTracker, frame, m: Moments, margin_px: float) -> None:
@@ -1437,6 +1515,12 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
                 first[tracker.name] = blob
                 _learn_yuv(tracker, frame, blob.moments, settings.support_margin_px)
             _separate_hues([t.yuv for t in trackers], led_rgb)
+            for tracker in trackers:
+                _learn_rect(tracker, frame, first[tracker.name].moments)
+                if tracker.yuv.phi0 is not None:
+                    # A rectangle turns with the blade: the markers' line says by how much.
+                    ml, mt = first["lead"].moments, first["trail"].moments
+                    tracker.yuv.beta0 = math.atan2(ml.y_px - mt.y_px, ml.x_px - mt.x_px)
             for k, tracker in enumerate(trackers):
                 m = first[tracker.name].moments
                 window = _window(tracker, shape, (m.x_px, m.y_px))
@@ -1446,7 +1530,10 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
             slow = True
         params[:] = 0.0
         windows = []
+        beta = _line_direction(lead, trail)
         for k, tracker in enumerate(trackers):
+            if tracker.yuv.phi0 is not None and beta is not None:
+                _orient(tracker.yuv.prm, tracker.yuv.phi0 + beta - tracker.yuv.beta0)
             params[k] = tracker.yuv.prm
             _apply_gain(params[k], gain)
             window = _window(tracker, shape) if tracker.has_position or not slow else None
