@@ -307,3 +307,26 @@ def test_rectangle_support_numpy_and_numba_agree(fields):
     # The rectangles contain the test's disks (radii 9 and 8 px): the same centroids as the round support.
     disk, _ = _run("numba", i420, _params(i420), led, *fields)
     np.testing.assert_allclose(b[:, [K.Q.X, K.Q.Y]], disk[:, [K.Q.X, K.Q.Y]], atol=0.05)
+
+
+def test_campaign_warns_when_the_led_is_found_in_some_videos_only(tmp_path):
+    from servoscope.campaign.manifest import load_campaign
+    from servoscope.campaign.runner import led_coverage_warning
+    from servoscope.simulate.clips import render_clip
+
+    scene = Scene.for_size(320, 256, background_seed=1)
+    n = 40
+    render_clip(tmp_path / "a.mp4", scene, np.zeros(n), led_level=np.r_[np.ones(20), np.zeros(n - 20)])
+    render_clip(tmp_path / "b.mp4", scene, np.zeros(n))  # its LED never switches off
+    render_clip(tmp_path / "c.mp4", scene, np.zeros(n), led_level=np.r_[np.ones(25), np.zeros(n - 25)])
+    toml = tmp_path / "campaign.toml"
+    toml.write_text('[markers]\nlead = "#d62728"\ntrail = "#2ca02c"\nled = "#ffd400"\n[input]\n'
+                    + "".join(f'[[tests]]\nvideo = "{v}.mp4"\nkind = "sine"\nfrequency_hz = {f}\namplitude = 0.1\n'
+                              for v, f in (("a", 1.0), ("b", 2.0), ("c", 3.0))))
+    campaign = load_campaign(toml)
+    tracks = {t.label: track_video(t.video, TrackerSettings()) for t in campaign.tests}
+    assert [tracks[t.label].t0_s is None for t in campaign.tests] == [False, True, False]
+    warning = led_coverage_warning(campaign, tracks)
+    assert warning.startswith("LED found in 2 of 3 videos but not in 1: ") and campaign.tests[1].label in warning
+    # Found everywhere (or nowhere): nothing to say.
+    assert led_coverage_warning(campaign, {k: v for k, v in tracks.items() if v.t0_s is not None}) is None

@@ -29,7 +29,7 @@ from ..sysid import (
 )
 from .manifest import Campaign, TestSpec, load_campaign
 
-__all__ = ["IdentificationResult", "identify", "track_campaign"]
+__all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
 
 ProgressFn = Callable[[str, int, int], None]
 
@@ -109,6 +109,31 @@ def track_campaign(
 def _t0(test: TestSpec, track: Track) -> float | None:
     # A t0 typed in the manifest wins: the user knows something the LED does not.
     return test.t0_s if test.t0_s is not None else track.t0_s
+
+
+def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
+    """A warning when the LED's switch was found in some of a campaign's videos but not in others.
+
+    One LED on one blade switches in every video of a campaign; where it was
+    not found, that video has no input start (no phase, no dead time) and the
+    identification silently rests on the others. Videos given a ``t0_s`` in
+    the manifest do not need the LED and are not counted.
+
+    Returns
+    -------
+    str or None
+        None when the campaign has no LED, or the LED was found in all or none of its videos.
+    """
+    if campaign.led is None:
+        return None
+    need = [t.label for t in campaign.tests if t.t0_s is None and t.label in tracks]
+    missing = [label for label in need if tracks[label].t0_s is None]
+    if not missing or len(missing) == len(need):
+        return None
+    found = len(need) - len(missing)
+    return (f"LED found in {found} of {len(need)} videos but not in {len(missing)}: {', '.join(missing)}; these have "
+            "no input start, so no phase and no dead time from them (each video's own warning says why; check the "
+            "LED colour, or give their t0_s in the manifest)")
 
 
 def _t0_stderr(test: TestSpec, track: Track) -> float | None:
@@ -322,6 +347,9 @@ def identify(
         if failures:
             campaign = campaign.without(failures)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
+    led_warning = led_coverage_warning(campaign, tracks)
+    if led_warning:
+        warnings.insert(0, led_warning)  # first: it decides what the phases and the dead time rest on
     fits: dict[str, SineFit] = {}
     amplitudes = []
     for test in campaign.sine_tests:
