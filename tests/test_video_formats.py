@@ -9,6 +9,7 @@ float64 on the source RGB, independently of the code under test.
 from __future__ import annotations
 
 from fractions import Fraction
+from pathlib import Path
 
 import av
 import numpy as np
@@ -354,3 +355,29 @@ def test_rolling_shutter_of_a_rotated_phone_video_reads_the_sensor_rows(tmp_path
     assert turned.t0_s == pytest.approx(flat.t0_s, abs=2e-6)
     turn = np.angle(np.exp(1j * (turned.angle_rad - flat.angle_rad)))
     assert np.abs(turn - np.median(turn)).max() < 2e-4 and abs(abs(np.median(turn)) - np.pi / 2) < 1e-3
+
+
+CHESSBOARD = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "opencv-chessboard").resolve()
+
+
+@pytest.mark.skipif(len(sorted(CHESSBOARD.glob("left*.jpg"))) != 13,
+                    reason=f"OpenCV sample chessboard photos not found in {CHESSBOARD}")
+def test_calibration_from_a_rotated_video_is_of_the_upright_images(tmp_path):
+    # The tracker reads a phone's video upright; its calibration must describe those images
+    # (size, principal point), not the stored ones. Oracle: the same photos calibrated as they are.
+    import cv2
+
+    from servoscope.camera import calibrate
+
+    photos = sorted(CHESSBOARD.glob("left*.jpg"))
+    grays = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in photos]
+    path = tmp_path / "phone.mp4"
+    # Stored turned clockwise, tagged to be shown turned back (counter-clockwise) upright.
+    _write(path, [np.ascontiguousarray(np.rot90(np.repeat(g[..., None], 3, axis=2), -1)) for g in grays],
+           codec="h264", rotation_deg=90, bit_rate=40_000_000)
+    from_video = calibrate([path], (9, 6))
+    from_photos = calibrate(photos, (9, 6))
+    assert tuple(from_video.camera.image_size) == tuple(from_photos.camera.image_size) == (640, 480)
+    k, k0 = from_video.camera.camera_matrix, from_photos.camera.camera_matrix
+    for i, j in [(0, 0), (1, 1), (0, 2), (1, 2)]:
+        assert k[i, j] == pytest.approx(k0[i, j], rel=0.02), (i, j)

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
+from ..video.reader import quarter_turns
 from .model import CameraModel
 
 __all__ = ["CalibrationResult", "calibrate", "parse_board"]
@@ -400,7 +401,14 @@ def _video_candidates(path: Path, n_candidates: int) -> Iterator[tuple[int, np.n
             for index, frame in enumerate(container.decode(stream)):
                 decoded += 1
                 if index in wanted_set:
-                    yield index, frame.to_ndarray(format="gray")
+                    # Upright, as the tracker reads the footage (a phone's rotation tag), so that the
+                    # calibration's image size and principal point are the tracked images'.
+                    try:
+                        turns = quarter_turns(frame)
+                    except ServoscopeError as exc:
+                        raise ServoscopeError(f"{path}: {exc}") from None
+                    gray = frame.to_ndarray(format="gray")
+                    yield index, np.ascontiguousarray(np.rot90(gray, turns)) if turns else gray
                 if index >= last:
                     break
         if decoded == 0:

@@ -24,8 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from numba import njit
-
 from ..errors import ServoscopeError
 
 __all__ = ["MATRICES", "YuvLayout", "ycbcr_matrix", "quantisation", "layout_of_format", "matrix_of_colorspace",
@@ -155,81 +153,6 @@ def encode_ycbcr(rgb: np.ndarray, *, matrix: str = "bt601", full_range: bool = F
     return y, np.ascontiguousarray(c[..., 0]), np.ascontiguousarray(c[..., 1])
 
 
-@njit(cache=True)
-def _expand_row(c_row, fx, w, out):
-    # A chroma row at luma resolution (nearest sample), as float32.
-    # Looping over samples, not pixels: an integer division per pixel cost more than the rest.
-    n = (w + fx - 1) // fx
-    for c in range(n):
-        val = np.float32(c_row[c])
-        for j in range(min(fx, w - c * fx)):
-            out[c * fx + j] = val
-
-
-@njit(cache=True)
-def _to_i420(y, u, v, fx, fy, k, out):
-    # k: rows of output (Y, Cb, Cr) code value = k[i,0] + k[i,1]·Y + k[i,2]·U + k[i,3]·V, in the
-    # source's code values; row by row (vectorisable loops), each pixel with its own chroma sample.
-    h, w = out.shape[0] * 2 // 3, out.shape[1]
-    hw, ww = h // 2, w // 2
-    lum = out[:h]
-    cb_plane = out[h:].ravel()[: hw * ww].reshape(hw, ww)
-    cr_plane = out[h:].ravel()[hw * ww:].reshape(hw, ww)
-    ue = np.empty(w, np.float32)
-    ve = np.empty(w, np.float32)
-    ysum = np.empty(ww, np.float32)
-    usum = np.empty(ww, np.float32)
-    vsum = np.empty(ww, np.float32)
-    half = np.float32(0.5)
-    lo = np.float32(0.0)
-    hi = np.float32(255.0)
-    for by in range(hw):
-        ysum[:] = 0.0
-        usum[:] = 0.0
-        vsum[:] = 0.0
-        for dy in range(2):
-            yy = 2 * by + dy
-            _expand_row(u[yy // fy], fx, w, ue)
-            _expand_row(v[yy // fy], fx, w, ve)
-            y_row = y[yy]
-            o_row = lum[yy]
-            for xx in range(w):
-                yv = np.float32(y_row[xx])
-                val = k[0, 0] + k[0, 1] * yv + k[0, 2] * ue[xx] + k[0, 3] * ve[xx]
-                o_row[xx] = np.int32(min(hi, max(lo, val)) + half)
-            for bx in range(ww):
-                ysum[bx] += np.float32(y_row[2 * bx]) + np.float32(y_row[2 * bx + 1])
-                usum[bx] += ue[2 * bx] + ue[2 * bx + 1]
-                vsum[bx] += ve[2 * bx] + ve[2 * bx + 1]
-        quarter = np.float32(0.25)
-        for bx in range(ww):
-            cb = k[1, 0] + quarter * (k[1, 1] * ysum[bx] + k[1, 2] * usum[bx] + k[1, 3] * vsum[bx])
-            cr = k[2, 0] + quarter * (k[2, 1] * ysum[bx] + k[2, 2] * usum[bx] + k[2, 3] * vsum[bx])
-            cb_plane[by, bx] = np.int32(min(hi, max(lo, cb)) + half)
-            cr_plane[by, bx] = np.int32(min(hi, max(lo, cr)) + half)
-
-
-@njit(cache=True)
-def _to_rgb(y, u, v, fx, fy, k, out):
-    # k: rows of output (R, G, B) = k[i,0] + k[i,1]·Y + k[i,2]·U + k[i,3]·V.
-    h, w = out.shape[0], out.shape[1]
-    ue = np.empty(w, np.float32)
-    ve = np.empty(w, np.float32)
-    half = np.float32(0.5)
-    lo = np.float32(0.0)
-    hi = np.float32(255.0)
-    for yy in range(h):
-        _expand_row(u[yy // fy], fx, w, ue)
-        _expand_row(v[yy // fy], fx, w, ve)
-        y_row = y[yy]
-        o_row = out[yy]
-        for xx in range(w):
-            yv = np.float32(y_row[xx])
-            for c in range(3):
-                val = k[c, 0] + k[c, 1] * yv + k[c, 2] * ue[xx] + k[c, 3] * ve[xx]
-                o_row[xx, c] = np.int32(min(hi, max(lo, val)) + half)
-
-
 def _affine(m: np.ndarray, layout: YuvLayout, scale: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """Output code values as affine functions of the source's (Y, U, V) code values, float32 (3, 4).
 
@@ -276,9 +199,11 @@ def to_i420_bt601(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout
     h, w = _check_planes(y, u, v, layout)
     m = ycbcr_matrix("bt601") @ np.linalg.inv(ycbcr_matrix(layout.matrix))
     k = _affine(m, layout, np.array([219.0, 224.0, 224.0]), np.array([16.0, 128.0, 128.0]))
+    from .colour_kernels import i420_kernel  # deferred: numba is slow to import, and most videos never need it
+
     out = np.empty((h * 3 // 2, w), np.uint8)
     fx, fy = layout.factors
-    _to_i420(y, u, v, fx, fy, k, out)
+    i420_kernel(y, u, v, fx, fy, k, out)
     return out
 
 
@@ -291,7 +216,9 @@ def to_rgb(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout) -> np
     h, w = y.shape
     _check_planes(y, u, v, layout)
     k = _affine(np.linalg.inv(ycbcr_matrix(layout.matrix)), layout, np.full(3, 255.0), np.zeros(3))
+    from .colour_kernels import rgb_kernel
+
     out = np.empty((h, w, 3), np.uint8)
     fx, fy = layout.factors
-    _to_rgb(y, u, v, fx, fy, k, out)
+    rgb_kernel(y, u, v, fx, fy, k, out)
     return out
