@@ -41,11 +41,10 @@ class VideoInfo:
     ----------
     path : Path
     width, height : int
-        Frame size in pixels.
-    codec : str
-        Decoder name, e.g. ``"h264"`` or ``"rawvideo"``.
         Frame size in pixels as the frames come, upright (a phone's portrait
         video stored as 1920×1080 with a 90° rotation reads as 1080×1920).
+    codec : str
+        Decoder name, e.g. ``"h264"`` or ``"rawvideo"``.
     pixel_format : str
         e.g. ``"yuv420p"``.
     frame_rate_hz : float or None
