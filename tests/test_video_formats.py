@@ -326,6 +326,19 @@ def test_twin_clip_tracks_to_its_truth_from_every_format(tmp_path, twin_frames, 
     print(f"{kw}: angle error RMS {rms:.4f} deg, max {np.abs(err).max():.4f} deg")
     # As the H.264 twin's own accuracy test (tests/test_tracking.py).
     assert np.abs(err).max() < 0.05 and rms < 0.02
+    # `servoscope track` says what it did to the frames (nothing, for plain 8-bit 4:2:0 TV BT.601).
+    from click.testing import CliRunner
+
+    from servoscope.cli import cli
+
+    run = CliRunner().invoke(cli, ["track", str(path), "--led", "none", "--out", str(tmp_path / "t.csv")])
+    assert run.exit_code == 0, run.output
+    notes = [line for line in run.output.splitlines() if line.startswith("clip.mp4: ") and "read" in line]
+    if len(kw) == 1:
+        assert notes == []
+    else:
+        assert len(notes) == 1 and "8-bit 4:2:0 limited-range BT.601" in notes[0]
+        assert ("upright" in notes[0]) == ("rotation_deg" in kw)
 
 
 def test_rolling_shutter_of_a_rotated_phone_video_reads_the_sensor_rows(tmp_path):

@@ -164,6 +164,11 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
                                lead_near=lead_near, trail_near=trail_near)
     result = track_video(video, settings)
+    from .video.reader import probe_video
+
+    note = probe_video(video).conversion_note()
+    if note:
+        click.echo(f"{video.name}: {note}")
     if out_csv is None:
         out_csv = video.with_name(video.stem + ".track.csv")
     out_csv.parent.mkdir(parents=True, exist_ok=True)

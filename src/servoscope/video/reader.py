@@ -79,6 +79,29 @@ class VideoInfo:
     matrix: str | None = "bt601"
     rotation_deg: int = 0
 
+    def conversion_note(self) -> str | None:
+        """What the reader does to this video's frames for the trackers, or None when nothing.
+
+        E.g. ``"hevc yuv422p10le: 10-bit 4:2:2, full range, BT.709, rotated 90°: read as 8-bit 4:2:0
+        limited-range BT.601, upright"``.
+        """
+        said = []
+        if self.bit_depth is not None and self.bit_depth != 8:
+            said.append(f"{self.bit_depth}-bit")
+        if self.chroma_subsampling not in (None, "4:2:0"):
+            said.append(str(self.chroma_subsampling))
+        if self.color_range == "pc":
+            said.append("full range")
+        if self.matrix not in (None, "bt601"):
+            said.append(str(self.matrix).upper().replace("BT", "BT."))
+        done = "read as 8-bit 4:2:0 limited-range BT.601" if said else "read"
+        if self.rotation_deg:
+            said.append(f"rotated {self.rotation_deg}°")
+            done += ", upright" if len(said) > 1 else " upright"
+        if not said:
+            return None
+        return f"{self.codec} {self.pixel_format}: {', '.join(said)}: {done}"
+
     @property
     def sensor_height(self) -> int:
         """Rows of the picture as stored (the sensor's rows, which a rolling shutter reads in turn)."""
