@@ -394,3 +394,24 @@ def test_calibration_from_a_rotated_video_is_of_the_upright_images(tmp_path):
     k, k0 = from_video.camera.camera_matrix, from_photos.camera.camera_matrix
     for i, j in [(0, 0), (1, 1), (0, 2), (1, 2)]:
         assert k[i, j] == pytest.approx(k0[i, j], rel=0.02), (i, j)
+
+
+def test_variable_frame_rate_twin_clip_tracks_at_its_own_times(tmp_path):
+    # A phone's slow motion: the interval wanders (8–12 ms) and the angle is sampled at each frame's
+    # own time; the track's times are the stored ones and its angles the truth at those times.
+    rng = np.random.default_rng(9)
+    times = 0.01 + np.cumsum(rng.uniform(0.008, 0.012, N_FRAMES))
+    pitch = 0.05 * np.sin(2 * np.pi * 4.0 * times)
+    scene = Scene(background_seed=5)
+    renderer = FrameRenderer(scene, None, noise_sigma_dn=1.5, noise_seed=1)
+    path = tmp_path / "slowmo.mp4"
+    with VideoWriter(path, scene.width, scene.height, 100, codec="hevc" if "libx265" in av.codecs_available
+                     else "h264", time_base=Fraction(1, 90000)) as writer:
+        stored = np.array([writer.write(renderer.render(float(p), 1.0, i), time_s=float(t))
+                           for i, (p, t) in enumerate(zip(pitch, times))])
+    track = track_video(path, TrackerSettings(led=None))
+    np.testing.assert_allclose(track.time_s, stored, atol=1e-12)
+    assert track.valid.all()
+    lead, trail = scene.sticker_centres_px(0.05 * np.sin(2 * np.pi * 4.0 * stored))
+    err = np.degrees(np.angle(np.exp(1j * (track.angle_rad - marker_angle_rad(lead, trail)))))
+    assert np.abs(err).max() < 0.05 and np.sqrt(np.mean(err ** 2)) < 0.02
