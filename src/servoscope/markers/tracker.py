@@ -514,7 +514,8 @@ class _MarkerTracker:
         self._velocity = (0.0, 0.0)
 
 
-def _choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettings) -> list[str]:
+def _choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettings, row_offset: int = 0,
+                  row_step: int = 1) -> list[str]:
     """Choose each marker's blob in the first frame (see :mod:`.selection`); set the trackers' hints.
 
     Returns the close-call warnings. When a marker's colour matches no blob
@@ -527,7 +528,12 @@ def _choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettin
     pinned = settings.lead_near is not None or settings.trail_near is not None
     if not pinned and not all(cands):
         return []
-    choice = choose_markers(cands[0], cands[1], lead_near=settings.lead_near, trail_near=settings.trail_near,
+    def in_image(near):
+        # Pins are in frame pixels; a field's image has every row_step-th row from row_offset.
+        return None if near is None else (near[0], (near[1] - row_offset) / row_step)
+
+    choice = choose_markers(cands[0], cands[1], lead_near=in_image(settings.lead_near),
+                            trail_near=in_image(settings.trail_near),
                             lead_colour=_spec_text(lead.seed), trail_colour=_spec_text(trail.seed), source=str(path))
     lead.hint = (choice.lead.x_px, choice.lead.y_px)
     trail.hint = (choice.trail.x_px, choice.trail.y_px)
@@ -740,7 +746,7 @@ def track_video(
                             raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
                         tracker.model = models.pop(0)
             if frame.index == 0:
-                warnings.extend(_choose_first(path, rgb, (lead, trail), settings))
+                warnings.extend(_choose_first(path, rgb, (lead, trail), settings, frame.row_offset, frame.row_step))
             # A camcorder's duplicated frame: the same image under a new timestamp.
             repeated.append(prev_rgb is not None and prev_rgb.shape == rgb.shape and np.array_equal(prev_rgb, rgb))
             prev_rgb = rgb
@@ -1504,7 +1510,7 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
                         if not models:
                             raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
                         tracker.model = models.pop(0)
-            warnings.extend(_choose_first(path, rgb, trackers, settings))
+            warnings.extend(_choose_first(path, rgb, trackers, settings, frame.row_offset, frame.row_step))
             first = {}
             for tracker in trackers:
                 blob, why = tracker.find(rgb)
