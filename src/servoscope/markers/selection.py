@@ -48,7 +48,7 @@ BORDER_FACTOR = 0.05
 #: Candidates below this binary area (px) are specks, not stickers.
 MIN_AREA_PX = 12
 #: At most this many candidates per marker (largest first) enter the pair scoring.
-MAX_CANDIDATES = 12
+MAX_CANDIDATES = 24
 
 
 @dataclass(frozen=True)
