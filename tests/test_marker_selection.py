@@ -212,7 +212,7 @@ def test_things_that_are_not_on_one_rigid_part_end_in_a_clear_error(tmp_path, ca
 
 # -- 6. measured angle noise, with and without camera shake ---------------------------------------
 @pytest.mark.parametrize("name", ["clean", "shake"])
-def test_measured_angle_noise_within_1p5_of_true_error(clips, name):
+def test_measured_angle_noise_within_1p5_of_true_error(clips, name, tmp_path, capsys):
     path, truth = clips[name]
     tr = track_video(path, TrackerSettings(led=None))
     err = np.angle(np.exp(1j * (tr.angle_rad - truth)))[tr.valid]
@@ -221,6 +221,8 @@ def test_measured_angle_noise_within_1p5_of_true_error(clips, name):
     assert 1 / 1.5 < s["angle_noise_measured_rad"] / true_rad < 1.5
     if name == "shake":
         assert s["camera_shake_px"] == pytest.approx(0.3, rel=0.3)
+        code, text = _run(capsys, "track", path, "--led", "none", "--out", tmp_path / "s.csv")
+        assert code == 0 and "camera shake 0.3" in text
     else:
         assert s["camera_shake_px"] == 0.0
 

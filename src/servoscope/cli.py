@@ -179,6 +179,9 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}° from pixel noise"
     if s.get("angle_noise_measured_rad") is not None:
         noise = f"{math.degrees(s['angle_noise_measured_rad']):.4f}° measured ({noise})"
+    if s.get("camera_shake_px"):
+        # The measured noise then comes from the markers' separation, which shake leaves alone.
+        noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{video.name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
