@@ -332,3 +332,32 @@ def test_campaign_warns_when_the_led_is_found_in_some_videos_only(tmp_path):
     assert warning.startswith("LED found in 2 of 3 videos but not in 1: ") and campaign.tests[1].label in warning
     # Found everywhere (or nowhere): nothing to say.
     assert led_coverage_warning(campaign, {k: v for k, v in tracks.items() if v.t0_s is not None}) is None
+
+
+def test_scores_prefer_solid_whole_blobs_of_the_other_markers_size():
+    """Candidates on a drawn frame: the disc wins over a larger box at the border, a larger
+    solid box away from it (size against the other marker's) and a ring (solidity)."""
+    from servoscope.markers.colour import ColourModel
+    from servoscope.markers.selection import choose_markers, marker_candidates
+
+    img = np.full((240, 360, 3), 90, np.uint8)
+    red, green = (214, 39, 40), (44, 160, 44)
+    cv2.circle(img, (100, 150), 8, red, -1, cv2.LINE_AA)  # the lead sticker
+    cv2.circle(img, (300, 160), 8, green, -1, cv2.LINE_AA)  # the trail sticker
+    cv2.rectangle(img, (300, 0), (359, 40), (160, 48, 42), -1)  # a box at the border
+    cv2.rectangle(img, (150, 40), (190, 70), red, -1)  # a larger box, inside
+    cv2.circle(img, (60, 60), 12, red, 4, cv2.LINE_AA)  # a ring: the size of a sticker, not solid
+    lead_m = ColourModel.from_seed((214.0, 39.0, 40.0))
+    trail_m = ColourModel.from_seed((44.0, 160.0, 44.0))
+    lead = marker_candidates(img, lead_m, lead_m.hue)
+    trail = marker_candidates(img, trail_m, trail_m.hue)
+    assert len(lead) == 4 and len(trail) == 1
+    ring = min(lead, key=lambda c: c.solidity)
+    assert (round(ring.x_px), round(ring.y_px)) == (60, 60) and ring.solidity < 0.7
+    assert sum(c.touches_border for c in lead) == 1
+    choice = choose_markers(lead, trail)
+    assert (round(choice.lead.x_px), round(choice.lead.y_px)) == (100, 150)
+    assert not choice.warnings
+    # Pinned to the box instead: it is taken (the user knows), and no close call is reported.
+    pinned = choose_markers(lead, trail, lead_near=(170.0, 55.0))
+    assert (round(pinned.lead.x_px), round(pinned.lead.y_px)) == (170, 55) and not pinned.warnings
