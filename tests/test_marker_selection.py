@@ -30,7 +30,7 @@ W, H = 480, 384
 BOX_RGB = (160, 48, 42)  # red-brown: the lead sticker's hue (#d62728) within 4°
 
 
-def _clip(path: Path, *, n: int = 120, fps: float = 200.0, box: bool = False, flicker: float = 0.0,
+def _clip(path: Path, *, n: int = 120, fps: float = 200.0, box: bool = False, box_rgb=BOX_RGB, flicker: float = 0.0,
           flicker_phase: float = math.pi / 2, shake_px: float = 0.0, decoy: tuple[float, float] | None = None,
           seed: int = 0) -> np.ndarray:
     """Render a sine of the blade, edit each frame, encode H.264; return the true angle per frame.
@@ -52,7 +52,7 @@ def _clip(path: Path, *, n: int = 120, fps: float = 200.0, box: bool = False, fl
             f = renderer.render(float(pitch[i]), 1.0, i).astype(np.float64)
             if box:
                 # Larger than a sticker, in the top-right corner, touching the border.
-                cv2.rectangle(f, (W - 70, 0), (W - 1, 45), BOX_RGB, -1)
+                cv2.rectangle(f, (W - 70, 0), (W - 1, 45), box_rgb, -1)
             if decoy is not None:
                 cv2.circle(f, (int(decoy[0] * 16), int(decoy[1] * 16)), int(radius * 16), (214, 39, 40), -1,
                            cv2.LINE_AA, shift=4)
@@ -361,3 +361,14 @@ def test_scores_prefer_solid_whole_blobs_of_the_other_markers_size():
     # Pinned to the box instead: it is taken (the user knows), and no close call is reported.
     pinned = choose_markers(lead, trail, lead_near=(170.0, 55.0))
     assert (round(pinned.lead.x_px), round(pinned.lead.y_px)) == (170, 55) and not pinned.warnings
+
+
+def test_auto_colours_pick_the_sticker_pair_not_a_big_box(tmp_path):
+    """Markers "auto": a large blue box (a third, distinct hue) used to be one of the two colours."""
+    truth = _clip(tmp_path / "blue.mp4", n=30, box=True, box_rgb=(30, 70, 200))
+    tr = track_video(tmp_path / "blue.mp4", TrackerSettings(lead="auto", trail="auto", led=None))
+    scene = Scene.for_size(W, H, background_seed=1)
+    lead0, trail0 = scene.sticker_centres_px(0.05 * np.sin(0.0))
+    assert tr.valid.all()
+    assert np.hypot(*(tr.lead_xy_px[0] - lead0)) < 0.5 and np.hypot(*(tr.trail_xy_px[0] - trail0)) < 0.5
+    assert _rms_deg(tr, truth) < 0.015  # 30 frames: the given colours' track gets 0.010°

@@ -33,6 +33,7 @@ from ..errors import ServoscopeError
 from .colour import ColourModel, hsv_of_rgb, parse_colour
 
 __all__ = ["BlobCandidate", "MarkerChoice", "parse_marker_spec", "marker_candidates", "choose_markers",
+           "auto_colour_models", "solidity_of", "check_near",
            "CLOSE_CALL_RATIO", "HUE_SCALE", "SIZE_LOG_SCALE"]
 
 #: A runner-up scoring at least this fraction of the chosen pair's score is a close call (warned).
@@ -178,12 +179,7 @@ def marker_candidates(rgb: np.ndarray, model: ColourModel, seed_hue: float) -> l
         ang = hsv[:, 0] * (np.pi / 90.0)
         hue = (math.atan2(float(np.sin(ang).mean()), float(np.cos(ang).mean())) * 90.0 / math.pi) % 180.0
         dh = abs(((hue - seed_hue + 90.0) % 180.0) - 90.0)
-        contours, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        hull = cv2.convexHull(np.concatenate(contours))
-        # A contour runs through pixel centres: the hull misses half a pixel all round, which
-        # matters for small blobs; add it back (perimeter/2 + the corners' π/4).
-        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + math.pi / 4.0
-        solidity = float(min(1.0, area / hull_area)) if hull_area > 0 else 1.0
+        solidity = solidity_of(comp)
         border = x0 == 0 or y0 == 0 or x0 + bw >= w or y0 + bh >= h
         r, g, b = (int(round(c)) for c in np.median(pixels.astype(np.float64), axis=0))
         score = (math.exp(-0.5 * (dh / HUE_SCALE) ** 2) * solidity**2 * (BORDER_FACTOR if border else 1.0)
@@ -191,6 +187,63 @@ def marker_candidates(rgb: np.ndarray, model: ColourModel, seed_hue: float) -> l
         out.append(BlobCandidate(float(cents[i, 0]), float(cents[i, 1]), area, f"#{r:02x}{g:02x}{b:02x}", dh,
                                  solidity, bool(border), score))
     return out
+
+
+def solidity_of(component: np.ndarray) -> float:
+    """Area of a binary blob over the area of its convex hull (pixel edges, not centres)."""
+    comp = np.ascontiguousarray(component, dtype=np.uint8)
+    area = float(np.count_nonzero(comp))
+    contours, _ = cv2.findContours(comp, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if not contours:
+        return 1.0
+    hull = cv2.convexHull(np.concatenate(contours))
+    # A contour runs through pixel centres: the hull misses half a pixel all round, which
+    # matters for small blobs; add it back (perimeter/2 + the corners' π/4).
+    hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + math.pi / 4.0
+    return float(min(1.0, area / hull_area)) if hull_area > 0 else 1.0
+
+
+def auto_colour_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
+    """The colours of the two blobs of distinct hue that look most like a pair of stickers.
+
+    For markers given as ``"auto"``: saturated blobs (not of an excluded
+    colour, the LED's or a given marker's) are scored as
+    :func:`marker_candidates` scores them, less the colour term (there is no
+    colour to match): solidity, the border, and the two sizes' likeness.
+    Returns the pair's colours, the right-hand blob's first (the lead marker
+    is the right one by convention); fewer when fewer blobs are found.
+    """
+    h, w = rgb.shape[:2]
+    hsv = hsv_of_rgb(rgb)
+    mask = ((hsv[..., 1] >= 100) & (hsv[..., 2] >= 60)).astype(np.uint8)
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    blobs: list[tuple[float, float, float, ColourModel]] = []  # x, area, score, colour
+    for i in np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable") + 1:
+        area = int(stats[i, cv2.CC_STAT_AREA])
+        if area < MIN_AREA_PX or len(blobs) >= 2 * MAX_CANDIDATES:
+            break
+        x0, y0, bw, bh = (int(v) for v in stats[i, :4])
+        comp = labels[y0:y0 + bh, x0:x0 + bw] == i
+        model = ColourModel.learn(rgb[y0:y0 + bh, x0:x0 + bw][comp])
+        if any(abs(((m.hue - model.hue + 90) % 180) - 90) < 12 for m in exclude):
+            continue
+        border = x0 == 0 or y0 == 0 or x0 + bw >= w or y0 + bh >= h
+        score = solidity_of(comp) ** 2 * (BORDER_FACTOR if border else 1.0) * area / (area + 20.0)
+        blobs.append((float(cents[i, 0]), float(area), score, model))
+    best: tuple[float, int, int] | None = None
+    for i, a in enumerate(blobs):
+        for j in range(i + 1, len(blobs)):
+            b = blobs[j]
+            if abs(((a[3].hue - b[3].hue + 90) % 180) - 90) < 12:
+                continue  # one colour: not a pair of differently coloured markers
+            size = math.exp(-0.5 * (math.log(a[1] / b[1]) / SIZE_LOG_SCALE) ** 2)
+            pair = a[2] * b[2] * size
+            if best is None or pair > best[0]:
+                best = (pair, i, j)
+    if best is None:
+        return [blobs[0][3]] if blobs else []
+    pair = sorted((blobs[best[1]], blobs[best[2]]), key=lambda f: -f[0])
+    return [f[3] for f in pair]
 
 
 def _pinned(cands: list[BlobCandidate], near: tuple[float, float], name: str, colour: str,

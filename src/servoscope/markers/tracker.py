@@ -32,7 +32,7 @@ from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
 from .moments import Moments, weighted_moments
 from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
-from .selection import choose_markers, marker_candidates
+from .selection import auto_colour_models, choose_markers, marker_candidates
 from .timebase import frame_timing
 from . import kernels as K
 
@@ -541,23 +541,8 @@ def _choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettin
 
 
 def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
-    """The two most prominent saturated blobs of distinct hue, right one first."""
-    hsv = hsv_of_rgb(rgb)
-    mask = ((hsv[..., 1] >= 100) & (hsv[..., 2] >= 60)).astype(np.uint8)
-    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    found: list[tuple[float, float, ColourModel]] = []
-    for i in np.argsort(-stats[1:, cv2.CC_STAT_AREA]) + 1:
-        if stats[i, cv2.CC_STAT_AREA] < 12:
-            break
-        model = ColourModel.learn(rgb[labels == i])
-        clash = [m for m in exclude + [f[2] for f in found] if abs(((m.hue - model.hue + 90) % 180) - 90) < 12]
-        if clash:
-            continue
-        found.append((float(cents[i, 0]), float(stats[i, cv2.CC_STAT_AREA]), model))
-        if len(found) == 2:
-            break
-    found.sort(key=lambda f: -f[0])
-    return [f[2] for f in found]
+    """The two blobs of distinct hue most like a pair of stickers, right one first (see :mod:`.selection`)."""
+    return auto_colour_models(rgb, exclude)
 
 
 #: Bounds of the LED level's noise (in units of its lit − off step) used to tell a partly lit
