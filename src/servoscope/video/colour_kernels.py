@@ -2,6 +2,8 @@
 
 Each takes the output as affine functions of the source's code values,
 ``k`` of shape (3, 4): ``out[i] = k[i,0] + k[i,1]·Y + k[i,2]·U + k[i,3]·V``.
+They release the GIL: the reader's decoder thread converts while the
+tracker works on the previous frame.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from numba import njit
 __all__ = ["expand_row", "i420_kernel", "rgb_kernel"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def expand_row(c_row, fx, w, out):
     # A chroma row at luma resolution (nearest sample), as float32.
     # Looping over samples, not pixels: an integer division per pixel cost more than the rest.
@@ -24,7 +26,7 @@ def expand_row(c_row, fx, w, out):
             out[c * fx + j] = val
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def i420_kernel(y, u, v, fx, fy, k, out):
     # k: rows of output (Y, Cb, Cr) code value = k[i,0] + k[i,1]·Y + k[i,2]·U + k[i,3]·V, in the
     # source's code values; row by row (vectorisable loops), each pixel with its own chroma sample.
@@ -67,7 +69,7 @@ def i420_kernel(y, u, v, fx, fy, k, out):
             cr_plane[by, bx] = np.int32(min(hi, max(lo, cr)) + half)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rgb_kernel(y, u, v, fx, fy, k, out):
     # k: rows of output (R, G, B) = k[i,0] + k[i,1]·Y + k[i,2]·U + k[i,3]·V.
     h, w = out.shape[0], out.shape[1]
