@@ -372,3 +372,24 @@ def test_auto_colours_pick_the_sticker_pair_not_a_big_box(tmp_path):
     assert tr.valid.all()
     assert np.hypot(*(tr.lead_xy_px[0] - lead0)) < 0.5 and np.hypot(*(tr.trail_xy_px[0] - trail0)) < 0.5
     assert _rms_deg(tr, truth) < 0.015  # 30 frames: the given colours' track gets 0.010°
+
+
+def test_a_camera_off_square_is_still_one_rigid_blade(tmp_path):
+    """A view 25° off square foreshortens the separation with the blade's angle (362–373 px over
+    ±0.5 rad): rigid all the same, every frame valid (a constant separation refused the track)."""
+    n, k = 120, math.cos(math.radians(25.0))
+    scene = Scene.for_size(W, H, background_seed=1)
+    pitch = 0.5 * np.sin(2 * np.pi * np.arange(n) / n)
+    renderer = FrameRenderer(scene, noise_sigma_dn=1.5)
+    squeeze = np.float32([[k, 0, (1 - k) * W / 2], [0, 1, 0]])  # the affine view of a turned camera
+    lead, trail = scene.sticker_centres_px(pitch)
+    for xy in (lead, trail):
+        xy[:, 0] = k * xy[:, 0] + (1 - k) * W / 2
+    with VideoWriter(tmp_path / "tilt.mp4", W, H, 100, codec="h264", bit_rate=20_000_000) as writer:
+        for i in range(n):
+            writer.write(cv2.warpAffine(renderer.render(float(pitch[i]), 1.0, i), squeeze, (W, H),
+                                        flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT))
+    assert np.ptp(np.hypot(*(lead - trail).T)) > 10.0
+    tr = track_video(tmp_path / "tilt.mp4", TrackerSettings(led=None))
+    assert tr.valid.all(), set(tr.reason)
+    assert _rms_deg(tr, marker_angle_rad(lead, trail)) < 0.01
