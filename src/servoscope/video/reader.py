@@ -295,6 +295,7 @@ def native_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     dtype = np.dtype(np.uint8) if frame.format.components[0].bits <= 8 else np.dtype("<u2")
     out = []
     for plane in frame.planes[:3]:
+        # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
         buf = np.frombuffer(plane, dtype)
         stride = plane.line_size // dtype.itemsize
         out.append(buf[: plane.height * stride].reshape(plane.height, stride)[:, :plane.width])
@@ -538,13 +539,7 @@ def yuv_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
             frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
                                    format="yuv420p")
-        w, h = frame.width, frame.height
-        out = []
-        for plane, (pw, ph) in zip(frame.planes, ((w, h), (w // 2, h // 2), (w // 2, h // 2))):
-            # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
-            buf = np.frombuffer(plane, np.uint8)
-            out.append(buf[: ph * plane.line_size].reshape(ph, plane.line_size)[:, :pw])
-        y, u, v = out
+        y, u, v = native_planes(frame)
     if turns:
         y, u, v = _upright(y, turns), _upright(u, turns), _upright(v, turns)
     return y, u, v
