@@ -246,11 +246,11 @@ class VideoWriter:
                     # One frame thread: the same bytes on every run (checked: 3 runs, 20 frames, 8 and
                     # 10 bits). Pinning x265's worker pool ("pools=") made it lose some packets' times.
                     stream.options = {"preset": preset,
-                                      "x265-params": f"log-level=error:frame-threads=1"}
+                                      "x265-params": "log-level=error:frame-threads=1"}
                 if gop is not None:
                     stream.codec_context.gop_size = int(gop)  # x264's / x265's keyint
             elif codec == "mpeg2":
-                stream = self._container.add_stream("mpeg2video", rate=self.fps)
+                stream = self._container.add_stream(_ENCODERS[codec], rate=self.fps)
                 stream.bit_rate = self.bit_rate
                 stream.codec_context.gop_size = 15 if gop is None else int(gop)
                 stream.codec_context.max_b_frames = 2
