@@ -21,6 +21,7 @@ from __future__ import annotations
 import re
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -153,6 +154,15 @@ def encode_ycbcr(rgb: np.ndarray, *, matrix: str = "bt601", full_range: bool = F
     return y, np.ascontiguousarray(c[..., 0]), np.ascontiguousarray(c[..., 1])
 
 
+@lru_cache(maxsize=32)
+def _coefficients(layout: YuvLayout, target: str) -> np.ndarray:
+    """The kernels' ``k`` for a layout, to "i420" (BT.601 TV) or "rgb"; computed once per layout, not per frame."""
+    if target == "i420":
+        m = ycbcr_matrix("bt601") @ np.linalg.inv(ycbcr_matrix(layout.matrix))
+        return _affine(m, layout, np.array([219.0, 224.0, 224.0]), np.array([16.0, 128.0, 128.0]))
+    return _affine(np.linalg.inv(ycbcr_matrix(layout.matrix)), layout, np.full(3, 255.0), np.zeros(3))
+
+
 def _affine(m: np.ndarray, layout: YuvLayout, scale: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """Output code values as affine functions of the source's (Y, U, V) code values, float32 (3, 4).
 
@@ -197,8 +207,7 @@ def to_i420_bt601(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout
         I420: Y plane, then Cb, then Cr (PyAV's yuv420p layout).
     """
     h, w = _check_planes(y, u, v, layout)
-    m = ycbcr_matrix("bt601") @ np.linalg.inv(ycbcr_matrix(layout.matrix))
-    k = _affine(m, layout, np.array([219.0, 224.0, 224.0]), np.array([16.0, 128.0, 128.0]))
+    k = _coefficients(layout, "i420")
     from .colour_kernels import i420_kernel  # deferred: numba is slow to import, and most videos never need it
 
     out = np.empty((h * 3 // 2, w), np.uint8)
@@ -215,7 +224,7 @@ def to_rgb(y: np.ndarray, u: np.ndarray, v: np.ndarray, layout: YuvLayout) -> np
     """
     h, w = y.shape
     _check_planes(y, u, v, layout)
-    k = _affine(np.linalg.inv(ycbcr_matrix(layout.matrix)), layout, np.full(3, 255.0), np.zeros(3))
+    k = _coefficients(layout, "rgb")
     from .colour_kernels import rgb_kernel
 
     out = np.empty((h, w, 3), np.uint8)
