@@ -393,3 +393,13 @@ def test_a_camera_off_square_is_still_one_rigid_blade(tmp_path):
     tr = track_video(tmp_path / "tilt.mp4", TrackerSettings(led=None))
     assert tr.valid.all(), set(tr.reason)
     assert _rms_deg(tr, marker_angle_rad(lead, trail)) < 0.01
+
+
+def test_markers_command_shows_solidity_and_border(clips, capsys):
+    path, _ = clips["box_flicker"]
+    code, text = _run(capsys, "markers", path)
+    assert code == 0
+    rows = [line for line in text.splitlines() if line.startswith("│")]
+    box = next(r for r in rows if r.rstrip("│ ").endswith("yes"))  # the box: solid but at the border
+    assert " 1.00 " in box or " 0.99 " in box
+    assert "--lead '#rrggbb@x,y'" in text

@@ -218,13 +218,19 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
         raise ServoscopeError(f"{video}: has no frame {frame_index}")
     found = find_candidates(chosen.rgb)
     table = Table(title=f"{video.name}, frame {frame_index} (t = {chosen.time_s:.3f} s): coloured blobs")
-    for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)"):
+    for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)", "solidity", "at border"):
         table.add_column(name, justify="right")
     for c in found:
-        table.add_row(str(c.number), c.colour_hex, f"{c.hue_deg:.0f}", f"{c.x_px:.1f}", f"{c.y_px:.1f}", str(c.area_px))
+        table.add_row(str(c.number), c.colour_hex, f"{c.hue_deg:.0f}", f"{c.x_px:.1f}", f"{c.y_px:.1f}", str(c.area_px),
+                      f"{c.solidity:.2f}", "yes" if c.touches_border else "")
     Console(highlight=False).print(table)
     if not found:
         click.echo("no saturated blob found", err=True)
+    else:
+        # Stickers are solid (≥ 0.9), whole (not at the border) and alike in size; to make sure, pin them.
+        click.echo("stickers are solid (>= 0.9), not at the border, and of like size; to choose one yourself, pin it "
+                   "with its colour and x, y from this table: track --lead '#rrggbb@x,y', or in campaign.toml "
+                   "lead = {colour = \"#rrggbb\", near = [x, y]}")
     if out_png is not None:
         out_png.parent.mkdir(parents=True, exist_ok=True)
         picture = draw_candidates(chosen.rgb, found)

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from .colour import ColourModel, hsv_of_rgb
+from .selection import solidity_of
 
 __all__ = ["Candidate", "find_candidates", "draw_candidates"]
 
@@ -27,6 +28,10 @@ class Candidate:
     area_px : int
     hue_deg : float
         0–360.
+    solidity : float
+        Area over convex-hull area: ≥ 0.9 for a disc, a square or a strip.
+    touches_border : bool
+        Whether the blob reaches the image's edge (then it is cut off).
     """
 
     number: int
@@ -35,6 +40,8 @@ class Candidate:
     y_px: float
     area_px: int
     hue_deg: float
+    solidity: float = 1.0
+    touches_border: bool = False
 
 
 def find_candidates(
@@ -63,8 +70,11 @@ def find_candidates(
             break
         model = ColourModel.learn(rgb[labels == i])
         r, g, b = (int(round(c)) for c in model.rgb)
+        x0, y0, bw, bh = (int(v) for v in stats[i, :4])
+        border = x0 == 0 or y0 == 0 or x0 + bw >= rgb.shape[1] or y0 + bh >= rgb.shape[0]
         out.append(
-            Candidate(len(out) + 1, f"#{r:02x}{g:02x}{b:02x}", float(cents[i, 0]), float(cents[i, 1]), area, 2.0 * model.hue)
+            Candidate(len(out) + 1, f"#{r:02x}{g:02x}{b:02x}", float(cents[i, 0]), float(cents[i, 1]), area, 2.0 * model.hue,
+                      solidity_of(labels[y0:y0 + bh, x0:x0 + bw] == i), bool(border))
         )
     return out
 
