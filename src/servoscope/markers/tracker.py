@@ -1366,10 +1366,19 @@ def _learn_yuv(tracker: _MarkerTracker, frame, m: Moments, margin_px: float) -> 
     reach = float(tracker.reach_px or tracker.extent_px)
     h, w = frame.y.shape
     r_core = max(1.5, 0.6 * (reach - 1.5))
-    x0, x1 = int(max(0, math.floor(m.x_px - r_core))), int(min(w, math.ceil(m.x_px + r_core) + 1))
-    y0, y1 = int(max(0, math.floor(m.y_px - r_core))), int(min(h, math.ceil(m.y_px + r_core) + 1))
+    prm = tracker.yuv.prm
+    rect = bool(prm[K.P.RECT])
+    r_box = math.hypot(prm[K.P.HALF_U], prm[K.P.HALF_V]) if rect else r_core
+    x0, x1 = int(max(0, math.floor(m.x_px - r_box))), int(min(w, math.ceil(m.x_px + r_box) + 1))
+    y0, y1 = int(max(0, math.floor(m.y_px - r_box))), int(min(h, math.ceil(m.y_px + r_box) + 1))
     yy, xx = np.mgrid[y0:y1, x0:x1]
-    core = (xx - m.x_px) ** 2 + (yy - m.y_px) ** 2 <= r_core**2
+    if rect:
+        # A strip's disk of radius 0.6·reach is mostly background: its rectangle, 2 px in.
+        c, s = float(prm[K.P.COS]), float(prm[K.P.SIN])
+        u, v = (xx - m.x_px) * c + (yy - m.y_px) * s, (yy - m.y_px) * c - (xx - m.x_px) * s
+        core = ((np.abs(u) <= max(1.0, prm[K.P.HALF_U] - 2.0)) & (np.abs(v) <= max(1.0, prm[K.P.HALF_V] - 2.0)))
+    else:
+        core = (xx - m.x_px) ** 2 + (yy - m.y_px) ** 2 <= r_core**2
     xs, ys = xx[core].astype(np.float64), yy[core].astype(np.float64)
     Y = frame.y[y0:y1, x0:x1][core].astype(np.float64)
     U = K._chroma_np(frame.u, xs, ys, frame.row_offset, frame.row_step)
@@ -1386,13 +1395,13 @@ def _learn_yuv(tracker: _MarkerTracker, frame, m: Moments, margin_px: float) -> 
         return (1.4826 * mad) ** 2 + 0.25
 
     st = tracker.yuv
-    prm = st.prm
     prm[K.P.YM], prm[K.P.UM], prm[K.P.VM] = ym, um, vm
     prm[K.P.DIR_U], prm[K.P.DIR_V] = (um - 128.0) / max(sat, 1e-9), (vm - 128.0) / max(sat, 1e-9)
     prm[K.P.COS_TOL] = math.cos(tol)
     prm[K.P.SAT_MIN] = max(6.0, 0.45 * sat)
     prm[K.P.AGREE] = AGREE
-    prm[K.P.RADIUS] = reach + margin_px + YUV_EXTRA_MARGIN_PX
+    if not rect:  # a rectangle's support is set by its shape (see _learn_rect)
+        prm[K.P.RADIUS] = reach + margin_px + YUV_EXTRA_MARGIN_PX
     prm[K.P.RING] = RING_PX
     prm[K.P.W_Y] = W_Y
     prm[K.P.ITER] = YUV_ITERATIONS
@@ -1455,7 +1464,13 @@ def _kernel_blob(tracker: _MarkerTracker, row: np.ndarray, window, shape) -> _Bl
         return None
     m = Moments(row[K.Q.M00], row[K.Q.X], row[K.Q.Y], row[K.Q.MU20], row[K.Q.MU11], row[K.Q.MU02])
     radius = float(st.prm[K.P.RADIUS])
-    support_out = m.x_px - radius < 0 or m.y_px - radius < 0 or m.x_px + radius > w - 1 or m.y_px + radius > h - 1
+    rx = ry = radius
+    if st.prm[K.P.RECT]:
+        # A rectangle's support reaches its own bounding box, not the disk around it.
+        hu, hv, c, s = (float(st.prm[i]) for i in (K.P.HALF_U, K.P.HALF_V, K.P.COS, K.P.SIN))
+        sm = float(st.prm[K.P.RECT_MARGIN])
+        rx, ry = abs(hu * c) + abs(hv * s) + sm, abs(hu * s) + abs(hv * c) + sm
+    support_out = m.x_px - rx < 0 or m.y_px - ry < 0 or m.x_px + rx > w - 1 or m.y_px + ry > h - 1
     at_border = bool(support_out or row[K.Q.RING_N] < 8)
     soft = SoftCentroid(m, math.sqrt(0.5 * (row[K.Q.VAR_X] + row[K.Q.VAR_Y])), radius, row[K.Q.CONTRAST],
                         0.0, at_border)
@@ -1532,10 +1547,11 @@ def _loop_yuv(path, fields, engine, settings, lead, trail, lead_spec, trail_spec
                 tracker.learn(rgb, blob)
                 blob = tracker.find(rgb)[0] or blob
                 first[tracker.name] = blob
+                # The shape first: a rectangle's colour is learned from its own interior.
+                _learn_rect(tracker, frame, blob.moments)
                 _learn_yuv(tracker, frame, blob.moments, settings.support_margin_px)
             _separate_hues([t.yuv for t in trackers], led_rgb)
             for tracker in trackers:
-                _learn_rect(tracker, frame, first[tracker.name].moments)
                 if tracker.yuv.phi0 is not None:
                     # A rectangle turns with the blade: the markers' line says by how much.
                     ml, mt = first["lead"].moments, first["trail"].moments
