@@ -11,7 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from servoscope.markers.tracker import _led_switch_time
+from servoscope.markers.led_timing import led_switch_time
+
+
+def _led_switch_time(time_s, level, exposure_s):
+    switch, why = led_switch_time(time_s, level, exposure_s)
+    return (None, None, why) if switch is None else (switch.t0_s, switch.stderr_s, why)
 
 
 def _levels(t0_s: float, time_s: np.ndarray, exposure_s: float, noise: float, rng) -> np.ndarray:
@@ -107,9 +112,17 @@ def test_a_clipped_led_widens_t0_to_its_exposure(tmp_path):
     led[switch + 1:] = 0.0
     true_t0 = switch / 100.0 - 0.005 + 0.4 * 0.01
     render_clip(tmp_path / "c.avi", Scene(), 0.02 * np.sin(np.arange(n) / 10.0), fps=100, led_level=led, codec="raw")
-    normal = track_video(tmp_path / "c.avi")
+    from servoscope.markers import TrackerSettings
+
+    normal = track_video(tmp_path / "c.avi", TrackerSettings(exposure_s=0.01))
     assert not any("white level" in w for w in normal.warnings)
     assert abs(normal.t0_s - true_t0) < 3 * normal.t0_uncertainty_s < 0.5e-3
+    # Not told the exposure, one partly lit frame dates t0 only to within what exposures
+    # from nothing to the whole frame would give: between t[29] and t[29] + (0.4 − ½)/fps.
+    unknown = track_video(tmp_path / "c.avi")
+    assert unknown.t0_earliest_s == pytest.approx(switch / 100.0 - 0.001, abs=2e-4)
+    assert unknown.t0_latest_s == pytest.approx(switch / 100.0, abs=1e-9)
+    assert unknown.t0_earliest_s <= true_t0 <= unknown.t0_latest_s
     _overexposed_copy(tmp_path / "c.avi", tmp_path / "bright.avi", gain=2.0)
     bright = track_video(tmp_path / "bright.avi")
     assert bright.n_valid == n  # the stickers are still found by their chroma

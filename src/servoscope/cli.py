@@ -131,16 +131,20 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
 @click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour (@x,y pins it).")
 @click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
-@click.option("--exposure", "exposure_s", type=float, help="Exposure time in seconds (for the LED's sub-frame timing).")
+@click.option("--exposure", "exposure_s", type=float,
+              help="Exposure (shutter) time in seconds, for the LED's sub-frame timing; leave out when not known "
+                   "(t0 is then only dated to within the frames' gap).")
 @click.option("--readout", "readout_s", type=float, default=0.0, show_default=True,
               help="Rolling-shutter readout time in seconds (top to bottom row); 0 = global shutter.")
+@click.option("--timestamp", type=click.Choice(["middle", "start", "end"]), default="middle", show_default=True,
+              help="Which point of its exposure a frame's timestamp marks.")
 @click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), help="Track CSV to write [default: VIDEO.track.csv].")
 @click.option("--deinterlace", type=click.Choice(["none", "fields", "fields-bff"]), default="none", show_default=True,
               help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
 @click.option("--overlay", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the footage with the centroids, joining line and angle drawn (.mp4 or .mov).")
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
-          readout_s: float, out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
+          readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
     """Track the two markers through VIDEO and write the per-frame angles."""
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
@@ -155,14 +159,14 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         parse_colour(led_spec, what="--led")
     camera = CameraModel.load(calibration) if calibration else None
     if exposure_s is not None and not exposure_s > 0:
-        raise ServoscopeError(f"--exposure must be > 0, got {exposure_s}")
+        raise ServoscopeError(f"{video}: --exposure must be > 0 (s), got {exposure_s}; leave it out when not known")
     if not (math.isfinite(readout_s) and readout_s >= 0):
         raise ServoscopeError(f"--readout must be a time >= 0 in seconds, got {readout_s}")
     if overlay is not None and overlay.suffix.lower() not in (".mp4", ".mov"):
         raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
-                               lead_near=lead_near, trail_near=trail_near)
+                               lead_near=lead_near, trail_near=trail_near, timestamp=timestamp)
     result = track_video(video, settings)
     from .video.reader import probe_video
 
@@ -175,6 +179,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     result.to_csv(out_csv)
     s = result.summary()
     t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
+    if result.t0_earliest_s is not None and result.led_partial_frames == 0:
+        t0 += f" (no frame partly lit: between {result.t0_earliest_s:.4f} and {result.t0_latest_s:.4f} s)"
     sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
     noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}° from pixel noise"
     if s.get("angle_noise_measured_rad") is not None:

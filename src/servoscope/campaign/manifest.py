@@ -25,7 +25,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan"}
-_CAMERA_KEYS = {"calibration", "exposure_s", "readout_s"}
+_CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
 _MARKER_KEYS = {"lead", "trail", "led"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
@@ -83,6 +83,9 @@ class Campaign:
         Tests left out because their video could not be read (``keep_going``).
     readout_s : float
         Rolling-shutter readout time (s); 0 for a global shutter.
+    timestamp : {"middle", "start", "end"}
+        Which point of its exposure a frame's timestamp marks (``[camera]
+        timestamp``; "middle" by default).
     lead_near, trail_near : (float, float) or None
         A marker pinned by position (px, first frame), from
         ``lead = {colour = "#…", near = [x, y]}``; None when not pinned.
@@ -101,6 +104,7 @@ class Campaign:
     readout_s: float = 0.0
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
+    timestamp: str = "middle"
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -143,7 +147,7 @@ class Campaign:
             self.path, self.lead, self.trail, self.led, self.camera, self.exposure_s,
             self.input_units, self.settle_s, tuple(t for t in self.tests if t.label not in reasons),
             self.skipped + tuple(reasons.items()), readout_s=self.readout_s,
-            lead_near=self.lead_near, trail_near=self.trail_near,
+            lead_near=self.lead_near, trail_near=self.trail_near, timestamp=self.timestamp,
         )
 
 
@@ -245,6 +249,11 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     exposure = None
     if "exposure_s" in camera_t:
         exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)
+    timestamp = camera_t.get("timestamp", "middle")
+    if timestamp not in ("start", "middle", "end"):
+        problems.add("camera.timestamp", f"{timestamp!r}: which point of its exposure a frame's time marks, "
+                     "one of \"start\", \"middle\" (the default), \"end\"")
+        timestamp = "middle"
     readout = 0.0
     if "readout_s" in camera_t:
         # A rolling shutter's row-to-row delay over the frame (0: global shutter).
@@ -375,6 +384,14 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
                             f"({info.frame_rate_hz:g} frames/s): the camera cannot resolve it",
                         )
                         ok = False
+                    if (exposure and info.frame_rate_hz and exposure > 1.001 / info.frame_rate_hz
+                            and not any(p.startswith("camera.exposure_s") for p in problems.items)):
+                        problems.add(
+                            "camera.exposure_s",
+                            f"{exposure:g} s is longer than the frame interval of {video!r} "
+                            f"({1e3 / info.frame_rate_hz:.4g} ms): a frame cannot expose longer than it lasts "
+                            "(give the shutter time, e.g. 0.001 for 1/1000 s, or leave it out when not known)",
+                        )
                     if (readout and info.frame_rate_hz and readout >= 1.0 / info.frame_rate_hz
                             and not any(p.startswith("camera.readout_s") for p in problems.items)):
                         problems.add(
@@ -400,4 +417,5 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         readout_s=float(readout or 0.0),
         lead_near=near["lead"],
         trail_near=near["trail"],
+        timestamp=str(timestamp),
     )

@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .._io import jsonable, write_json_atomic, write_text_atomic
+from ..camera.exposure import ExposureEstimate, estimate_exposure
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
 from ..sysid import (
@@ -44,6 +45,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         readout_s=campaign.readout_s,
         lead_near=campaign.lead_near,
         trail_near=campaign.trail_near,
+        timestamp=campaign.timestamp,
     )
 
 
@@ -141,6 +143,105 @@ def _t0_stderr(test: TestSpec, track: Track) -> float | None:
     return track.t0_uncertainty_s if test.t0_s is None else 0.0
 
 
+def campaign_exposure(campaign: Campaign, tracks: dict[str, Track]) -> ExposureEstimate:
+    """The campaign's exposure: the one given, else what its LED switches show (see :mod:`servoscope.camera.exposure`)."""
+    switches = []
+    for test in campaign.tests:
+        track = tracks.get(test.label)
+        if track is None or test.t0_s is not None or track.t0_s is None or track.led_partial_frames is None:
+            continue
+        period = float(np.median(np.diff(track.time_s))) if track.time_s.size > 1 else 0.0
+        switches.append((track.led_partial_frames, period))
+    return estimate_exposure(switches, campaign.exposure_s)
+
+
+def shared_t0_stderr(tests: list[TestSpec], tracks: dict[str, Track]) -> tuple[float, dict[str, float]]:
+    """Split the dwells' t0 uncertainties into a part they may share and their own parts.
+
+    Each LED-dated t0 lies in an interval of the frame clock (the unexposed
+    gap, or ±3σ of a partly lit frame's date). When those intervals, taken
+    as fractions of a frame after the frame before the switch, all overlap,
+    every switch may have fallen at the same point φ of the frame clock (as
+    when one script starts the camera and the input), somewhere in their
+    intersection [L, H]: then the dwells' errors c_i − φ (c_i each one's
+    estimate) move together and do not average out, and the footage cannot
+    tell otherwise. The phase dead time then errs by the dwells' weighted
+    mean error c̄ − φ (weights f²/σ², as the phases weigh in the fit), whose
+    root mean square over φ uniform in [L, H] is the shared part; each dwell
+    keeps √(σ² − shared²) as its own (none when it is all shared).
+
+    Returns
+    -------
+    (float, dict of label → float)
+        The shared standard uncertainty (s; 0 when the intervals exclude a
+        common phase) and each LED-dated dwell's own.
+    """
+    own: dict[str, float] = {}
+    lows, highs, centres, weights, periods = [], [], [], [], []
+    for test in tests:
+        track = tracks.get(test.label)
+        if track is None or test.t0_s is not None or track.t0_s is None or not track.t0_uncertainty_s:
+            continue
+        own[test.label] = float(track.t0_uncertainty_s)
+        if track.t0_earliest_s is None or track.time_s.size < 2:
+            return 0.0, own  # tracks without the interval (older caches): nothing to share
+        period = float(np.median(np.diff(track.time_s)))
+        clock = track.angle_time_s if track.angle_time_s is not None else track.time_s
+        before = int(np.searchsorted(clock, track.t0_s)) - 1
+        ref = float(clock[max(before, 0)])
+        lows.append((track.t0_earliest_s - ref) / period)
+        highs.append((track.t0_latest_s - ref) / period)
+        centres.append((track.t0_s - ref) / period)
+        weights.append(((test.frequency_hz or 1.0) / track.t0_uncertainty_s) ** 2)
+        periods.append(period)
+    if len(centres) < 2 or max(lows) > min(highs):
+        return 0.0, own
+    low, high = max(lows), min(highs)
+    mean_centre = float(np.average(centres, weights=weights))
+    frame = float(np.median(periods))
+    shared = frame * math.sqrt((mean_centre - 0.5 * (low + high)) ** 2 + (high - low) ** 2 / 12.0)
+    return shared, {label: math.sqrt(max(sigma**2 - shared**2, 0.0)) for label, sigma in own.items()}
+
+
+def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
+    """The dead time from the dwells' phases and from the step, each with its own interval.
+
+    Returns
+    -------
+    dict
+        ``{"phase": {...} or None, "step": {...} or None}``, each
+        ``{"value_s", "stderr_s", "ci95_s", "shared_t0_stderr_s"}``.
+    """
+    out: dict = {"phase": None, "step": None}
+    if model.dead_time_s is not None and math.isfinite(model.dead_time_s):
+        se = math.hypot(model.dead_time_stderr_s or 0.0, shared_t0_s)
+        value = float(model.dead_time_s)
+        out["phase"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
+                        "shared_t0_stderr_s": shared_t0_s}
+    if step is not None and step.dead_time_s is not None and math.isfinite(step.dead_time_s):
+        se = float(step.dead_time_stderr_s or 0.0)
+        value = float(step.dead_time_s)
+        out["step"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
+                       "shared_t0_stderr_s": None}
+    return out
+
+
+def dead_time_disagreement(estimates: dict) -> str | None:
+    """A warning when the phase and step dead times differ by more than their uncertainties allow (95 %)."""
+    phase, step = estimates.get("phase"), estimates.get("step")
+    if phase is None or step is None:
+        return None
+    diff = phase["value_s"] - step["value_s"]
+    se = math.hypot(phase["stderr_s"], step["stderr_s"])
+    if se <= 0 or abs(diff) <= 1.96 * se:
+        return None
+    return (f"dead time from the dwells' phases ({1e3 * phase['value_s']:.2f} ± {1e3 * phase['stderr_s']:.2f} ms) and "
+            f"from the step ({1e3 * step['value_s']:.2f} ± {1e3 * step['stderr_s']:.2f} ms) differ by "
+            f"{abs(diff) / se:.1f} standard errors: the linear model or the "
+            "input start of one of them is not what the footage shows (check the LED, the exposure and the "
+            "step's fit)")
+
+
 @dataclass
 class IdentificationResult:
     """Everything one identification produced.
@@ -157,6 +258,11 @@ class IdentificationResult:
         The step test, with the dead time fitted against the model.
     step_label : str or None
     warnings : list of str
+    exposure : ExposureEstimate or None
+        The camera's exposure: given, or estimated from the LED's switches.
+    shared_t0_stderr_s : float
+        The part of the dwells' t0 uncertainty they may share (see
+        :func:`shared_t0_stderr`), added to the phase dead time's.
     """
 
     campaign: Campaign
@@ -167,6 +273,8 @@ class IdentificationResult:
     step: StepAnalysis | None = None
     step_label: str | None = None
     warnings: list[str] = field(default_factory=list)
+    exposure: ExposureEstimate | None = None
+    shared_t0_stderr_s: float = 0.0
 
     @property
     def transfer_function(self):
@@ -175,31 +283,52 @@ class IdentificationResult:
 
     @property
     def dead_time_s(self) -> float | None:
-        """Dead time: from the step test (LED off → blade moving, fitted against
-        the model), else from the dwells' phases (complex fit), else None."""
-        if self.step is not None and self.step.dead_time_s is not None and math.isfinite(self.step.dead_time_s):
-            return float(self.step.dead_time_s)
-        if self.model.dead_time_s is not None and math.isfinite(self.model.dead_time_s):
-            return float(self.model.dead_time_s)
-        return None
+        """Dead time: the more precise of the step test's (LED off → blade moving,
+        fitted against the model) and the dwells' phases' (complex fit); None
+        without either. Its stderr and interval are the same estimate's."""
+        source = self.dead_time_source
+        if source is None:
+            return None
+        return self.dead_time_estimates["step" if source == "step test" else "phase"]["value_s"]
 
     @property
     def dead_time_source(self) -> str | None:
-        if self.step is not None and self.step.dead_time_s is not None and math.isfinite(self.step.dead_time_s):
+        """"step test" or "frequency response (phase)": where :attr:`dead_time_s` comes from."""
+        estimates = self.dead_time_estimates
+        step, phase = estimates["step"], estimates["phase"]
+        if step is not None and (phase is None or step["stderr_s"] <= phase["stderr_s"]):
             return "step test"
-        if self.model.dead_time_s is not None and math.isfinite(self.model.dead_time_s):
+        if phase is not None:
             return "frequency response (phase)"
         return None
+
+    @property
+    def dead_time_estimates(self) -> dict:
+        """The dead time from the dwells' phases and from the step, each with its interval (see :func:`dead_time_estimates`)."""
+        return dead_time_estimates(self.model, self.step, self.shared_t0_stderr_s)
+
+    @property
+    def dead_time_stderr_s(self) -> float | None:
+        """Standard error of :attr:`dead_time_s`, from the same estimate."""
+        chosen = self.dead_time_estimates.get({"step test": "step", "frequency response (phase)": "phase"}.get(
+            self.dead_time_source or "", ""))
+        return None if chosen is None else chosen["stderr_s"]
 
     def summary(self) -> dict:
         """The content of ``result.json``: plain types only."""
         model = dict(jsonable(self.model.summary()))
+        estimates = self.dead_time_estimates
         # The model's own delay estimate (from the phases, complex fit) stays
-        # visible; the model's dead time is the best one available.
+        # visible; the model's dead time is the best one available, and its
+        # stderr and interval are that estimate's (one name, one estimator).
         model["dead_time_from_phase_s"] = model.get("dead_time_s")
-        model["dead_time_from_phase_stderr_s"] = model.pop("dead_time_stderr_s", None)
+        model["dead_time_from_phase_stderr_s"] = None if estimates["phase"] is None else estimates["phase"]["stderr_s"]
         model["dead_time_s"] = self.dead_time_s
         model["dead_time_source"] = self.dead_time_source
+        model["dead_time_stderr_s"] = self.dead_time_stderr_s
+        chosen = estimates["step"] if self.dead_time_source == "step test" else estimates["phase"]
+        if chosen is not None and isinstance(model.get("ci95"), dict):
+            model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen["ci95_s"])}
         tests = []
         for test in self.campaign.tests:
             track = self.tracks[test.label]
@@ -230,6 +359,9 @@ class IdentificationResult:
                 "bandwidth_rad_s": self.model.bandwidth_rad_s,
                 "bandwidth_hz": self.model.bandwidth_rad_s / (2 * math.pi),
                 "dead_time_s": self.dead_time_s,
+                "dead_time": {**estimates, "source": {"step test": "step", "frequency response (phase)": "phase"}.get(
+                    self.dead_time_source or "")},
+                "exposure": None if self.exposure is None else self.exposure.summary(),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
                 "tests": tests,
@@ -347,6 +479,8 @@ def identify(
         if failures:
             campaign = campaign.without(failures)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
+    exposure = campaign_exposure(campaign, tracks)
+    shared_t0_s, own_t0_stderr = shared_t0_stderr(campaign.sine_tests, tracks)
     led_warning = led_coverage_warning(campaign, tracks)
     if led_warning:
         warnings.insert(0, led_warning)  # first: it decides what the phases and the dead time rest on
@@ -367,7 +501,8 @@ def identify(
                 track.angle_rad,
                 test.frequency_hz,
                 t0_s=t0,
-                t0_stderr_s=_t0_stderr(test, track),
+                # Each dwell's own part; the part they may share goes to the dead time (below).
+                t0_stderr_s=own_t0_stderr.get(test.label, _t0_stderr(test, track)),
                 settle_s=campaign.settle_s,
                 valid=track.valid,
                 # Harmonics the two markers do not share are tracking
@@ -386,8 +521,9 @@ def identify(
             f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
         )
     fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
-    if campaign.exposure_s is not None:
-        fr = fr.corrected_for_exposure(campaign.exposure_s)
+    if exposure.value_s is not None:
+        # Given, or shown by the LED (a few per mille of gain at most: the box filter's sinc).
+        fr = fr.corrected_for_exposure(exposure.value_s)
     if fit not in ("auto", "magnitude", "complex"):
         raise ServoscopeError(f"fit: unknown mode {fit!r} (use auto, magnitude or complex)")
     phases_known = bool(np.all(np.isfinite(fr.phase_deg)))
@@ -435,4 +571,12 @@ def identify(
                     step_label = test.label
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
-    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings)
+    if shared_t0_s > 0 and model.dead_time_s is not None:
+        warnings.append(
+            f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
+            f"(±{1e3 * shared_t0_s:.2f} ms) are taken as shared, not averaged, in the phase dead time"
+            + ("" if exposure.known else f"; exposure {exposure.detail}"))
+    disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
+    if disagreement:
+        warnings.append(disagreement)
+    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s)

@@ -31,6 +31,7 @@ from ..video.reader import VideoInfo, iter_frames, iter_yuv_frames, probe_video,
 from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
 from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
 from .moments import Moments, weighted_moments
+from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s, led_switch_time
 from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
 from .selection import auto_colour_models, choose_markers, marker_candidates
 from .timebase import frame_timing
@@ -65,8 +66,11 @@ class TrackerSettings:
     camera : CameraModel or None
         When given, centroids are undistorted before angles are computed.
     exposure_s : float or None
-        Exposure time, for the LED's sub-frame switch time; None assumes the
-        exposure lasts the whole frame interval.
+        Exposure (shutter) time, for the LED's sub-frame switch time; None
+        (unknown) assumes nothing about it: a switch that lit no frame partly
+        is then anywhere between two frame times (see
+        :mod:`servoscope.markers.led_timing`). Must be > 0 and no longer than
+        the frame interval.
     search_radius_px : float
         Half-size of the search window beyond the marker's own extent (px).
     support_margin_px : float
@@ -118,6 +122,12 @@ class TrackerSettings:
         angle's sample time and the LED's switch time are corrected for the
         rows the stickers and the LED are on. Must be shorter than the frame
         (or field) interval.
+    timestamp : {"middle", "start", "end"}
+        Which point of its exposure a frame's timestamp marks ("middle", the
+        default, as the digital twin and most containers' players assume).
+        With a known exposure, angles and t0 are dated at the exposures'
+        middles; the phases and the dead time do not depend on it (the LED
+        and the markers share each frame's exposure).
     """
 
     lead: str = "#d62728"
@@ -133,6 +143,7 @@ class TrackerSettings:
     engine: str = "auto"
     backend: str = "auto"
     readout_s: float = 0.0
+    timestamp: str = "middle"
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
 
@@ -182,6 +193,13 @@ class Track:
         :func:`_angle_row_weights`). Fit the angle against this.
     readout_s : float
         Rolling-shutter readout time the track was corrected for (0: none).
+    t0_earliest_s, t0_latest_s : float or None
+        The interval the switch can lie in (the unexposed gap when no frame
+        was partly lit; see :class:`~servoscope.markers.led_timing.SwitchTime`).
+    led_partial_frames : int or None
+        Partly lit frames at the switch (0, 1 or 2): evidence of the
+        exposure, pooled over a campaign by
+        :func:`servoscope.camera.exposure.estimate_exposure`.
     intra : ndarray of bool or None
         Frames the codec coded on their own (I-frames; every frame of
         uncompressed video); None when unknown. ``fit_sine`` checks the
@@ -210,6 +228,9 @@ class Track:
     angle_time_s: np.ndarray | None = None
     readout_s: float = 0.0
     intra: np.ndarray | None = None
+    t0_earliest_s: float | None = None
+    t0_latest_s: float | None = None
+    led_partial_frames: int | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -545,90 +566,6 @@ def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourMode
     return auto_colour_models(rgb, exclude)
 
 
-#: Bounds of the LED level's noise (in units of its lit − off step) used to tell a partly lit
-#: frame from a lit or dark one: at least 0.3 % (8-bit luma of a 100 DN step quantizes to 1 %
-#: per pixel; the disk's mean of dozens of pixels is finer), at most 3 % (the band a level
-#: must clear was 3 % before the noise was measured, and a noisier LED is better trusted less).
-_LED_NOISE_FLOOR = 0.003
-_LED_NOISE_CAP = 0.03
-
-
-def _led_level_noise(level: np.ndarray, k: int) -> float:
-    """Robust standard deviation of the LED level in the settled frames away from the switch at ``k``."""
-    ok = np.isfinite(level)
-    lit = level[: max(k - 1, 0)][ok[: max(k - 1, 0)]]
-    dark = level[k + 1:][ok[k + 1:]]
-    deviations = np.concatenate([lit - np.median(lit) if lit.size else lit,
-                                 dark - np.median(dark) if dark.size else dark])
-    if deviations.size < 4:
-        return _LED_NOISE_CAP
-    # The standard deviation (2.7× as efficient as the MAD on Gaussian noise: a few dozen
-    # frames give σ to ±10 %), of the frames within 5 MADs: a flicker or a passing
-    # reflection must not widen it.
-    mad = float(np.median(np.abs(deviations)) / 0.6745)
-    kept = deviations[np.abs(deviations) <= 5.0 * mad] if mad > 0 else deviations
-    sigma = float(np.sqrt(np.mean(kept**2)))
-    return min(max(sigma, _LED_NOISE_FLOOR), _LED_NOISE_CAP)
-
-
-def _frame_period_and_exposure(time_s: np.ndarray, exposure_s: float | None) -> tuple[float, float]:
-    """Median frame interval (s) and the exposure (s): the given one, at most one interval; else one interval."""
-    period = float(np.median(np.diff(time_s))) if time_s.size > 1 else 0.0
-    return period, period if exposure_s is None else min(float(exposure_s), period)
-
-
-def _led_switch_time(time_s: np.ndarray, level: np.ndarray, exposure_s: float | None) -> tuple[float | None, float | None, str | None]:
-    """Sub-frame time at which a lit LED switches off, and its standard uncertainty (s).
-
-    A frame whose exposure straddles the switch is partly lit: with exposure
-    window [t − e/2, t + e/2], its level f gives t0 = t − e/2 + f·e, with
-    the level's noise σ (measured on the settled frames) as e·σ. When the
-    exposures are end to end (e = frame interval, the default), the first
-    dark frame k and the one before give t0 = t[k−1] − e/2 + (f[k−1] + f[k])·e
-    (σ√2·e), wherever the switch fell. Otherwise a level is
-    taken as partial when it is 3σ clear of both 0 and 1; when no frame is,
-    the switch fell between exposures or within 3σ·e of an exposure's edge:
-    the midpoint of that interval, with the uncertainty of a uniform
-    distribution over it (never zero: a switch in the last 3σ of an
-    exposure looks like a whole lit frame).
-
-    Assumes the LED's luma is linear in its lit fraction of the exposure
-    (not clipped at white, no strong gamma); the digital twin's is.
-    """
-    ok = np.isfinite(level)
-    if ok.sum() < 3:
-        return None, None, "LED: too few frames to find its switch"
-    lit = level > 0.5
-    first_off = np.flatnonzero(ok & ~lit)
-    if not lit[ok][0]:
-        return None, None, "LED not lit in the first frame: no input start found"
-    if first_off.size == 0:
-        return None, None, "LED never switches off: no input start found"
-    k = int(first_off[0])
-    period, exposure = _frame_period_and_exposure(time_s, exposure_s)
-    noise = _led_level_noise(level, k)
-    contiguous = (k >= 1 and exposure > 0 and exposure >= 0.999 * period
-                  and abs(float(time_s[k] - time_s[k - 1]) - period) < 0.01 * period)
-    if contiguous and np.isfinite(level[k - 1]) and np.isfinite(level[k]):
-        # Exposures end to end: the light of frames k−1 and k together is the time the LED
-        # was lit after frame k−1's exposure began, wherever in the two the switch fell.
-        # No threshold decides which frame is the partial one, so a noisy level cannot
-        # send the estimate to the wrong frame.
-        lit_s = float(np.clip(level[k - 1] + level[k], 0.0, 2.0)) * exposure
-        t0 = float(time_s[k - 1]) - exposure / 2.0 + lit_s
-        return t0, float(math.hypot(math.sqrt(2.0) * noise * exposure, 1e-4 * period)), None
-    band = 3.0 * noise
-    candidates = [j for j in (k - 1, k) if 0 <= j < level.size and band < level[j] < 1.0 - band]
-    if candidates and exposure > 0:
-        j = min(candidates, key=lambda j: abs(level[j] - 0.5))
-        t0 = time_s[j] - exposure / 2.0 + float(np.clip(level[j], 0.0, 1.0)) * exposure
-        return float(t0), float(math.hypot(noise * exposure, 1e-4 * period)), None
-    # Between the end of frame k−1's exposure and the start of frame k's, widened by the band.
-    low = float(time_s[k - 1]) + exposure / 2.0 - band * exposure
-    high = float(time_s[k]) - exposure / 2.0 + band * exposure
-    return 0.5 * (low + high), float(max(high - low, 0.0) / math.sqrt(12.0)), None
-
-
 def _record_markers(frame, found: dict, xy: dict, area: dict, sigma: dict) -> None:
     """Append one frame's centroids, areas and uncertainties (NaN where a marker is missing).
 
@@ -780,6 +717,7 @@ def track_video(
     if expected and n < expected:
         warnings.append(f"decoded {n} of {expected} announced frames: the file ends early")
     time_s = np.asarray(times)
+    _check_exposure(path, settings, time_s)
     lead_arr = np.asarray(xy["lead"], dtype=np.float64).reshape(-1, 2)
     trail_arr = np.asarray(xy["trail"], dtype=np.float64).reshape(-1, 2)
     lead_sigma = np.asarray(sigma["lead"], dtype=np.float64)
@@ -819,7 +757,9 @@ def track_video(
     # Only the components across the joining line turn it: σθ = √(σ_lead² + σ_trail²) / L.
     separation = np.hypot(*(lead_arr - trail_arr).T)
     angle_sigma = np.where(valid, np.hypot(lead_sigma, trail_sigma) / separation, np.nan)
-    angle_time = time_s.astype(np.float64, copy=True)
+    # Angles and t0 on the exposures' middle clock (the LED and the stickers share each exposure).
+    angle_clock_s = time_s.astype(np.float64) + exposure_middle_offset_s(settings.timestamp, settings.exposure_s)
+    angle_time = angle_clock_s.copy()
     if settings.readout_s > 0 and n:
         w_lead, why = _angle_row_weights(lead_arr, trail_arr, valid)
         if why:
@@ -843,6 +783,8 @@ def track_video(
 
     led_level = np.full(n, np.nan)
     t0 = t0_unc = None
+    t0_window: tuple[float, float] | None = None
+    led_partial: int | None = None
     led_peak = max((p for p in led_peak_dn if math.isfinite(p)), default=math.nan)
     led_clipped = led_peak >= _LED_CLIP_DN
     if led_signal and np.isfinite(led_signal).sum() >= 3:
@@ -853,14 +795,21 @@ def track_video(
         on, off = float(np.median(head)), float(np.median(tail))
         if on - off > 10.0:
             led_level = (signal - off) / (on - off)
-            t0, t0_unc, why = _led_switch_time(time_s, led_level, settings.exposure_s)
+            switch, why = led_switch_time(angle_clock_s, led_level, settings.exposure_s)
             if why:
                 warnings.append(why)
+            if switch is not None:
+                t0, t0_unc = switch.t0_s, switch.stderr_s
+                t0_window = (switch.earliest_s, switch.latest_s)
+                led_partial = switch.partial_frames
             if t0 is not None and led_clipped:
                 # A clipped LED reads fully lit for part of the exposure it was not: the
-                # partly lit frame's level, and so t0 within that frame, is not known.
-                exposure = _frame_period_and_exposure(time_s, settings.exposure_s)[1]
+                # partly lit frame's level, and so t0 within that frame, is not known
+                # (within the whole frame interval when the exposure is not known).
+                period = frame_period_s(time_s)
+                exposure = period if settings.exposure_s is None else min(settings.exposure_s, period)
                 t0_unc = max(t0_unc or 0.0, exposure / math.sqrt(12.0))
+                t0_window = (min(t0_window[0], t0 - exposure / 2), max(t0_window[1], t0 + exposure / 2))
                 warnings.append(
                     f"LED at the video's white level (luma {led_peak:.0f}): a clipped LED's "
                     "partly lit frame looks brighter than it was, so t0 is known only to within its "
@@ -901,7 +850,26 @@ def track_video(
         angle_time_s=angle_time,
         readout_s=float(settings.readout_s),
         intra=np.asarray(intra, dtype=bool),
+        t0_earliest_s=None if t0_window is None else float(t0_window[0]),
+        t0_latest_s=None if t0_window is None else float(t0_window[1]),
+        led_partial_frames=led_partial,
     )
+
+
+def _check_exposure(path: Path, settings: TrackerSettings, time_s: np.ndarray) -> None:
+    """Refuse an exposure no camera gives: zero or negative, or longer than the frame interval."""
+    if settings.timestamp not in TIMESTAMP_CONVENTIONS:
+        raise ServoscopeError(f"{path}: timestamp {settings.timestamp!r}: use one of {', '.join(TIMESTAMP_CONVENTIONS)}")
+    if settings.exposure_s is None:
+        return
+    period = frame_period_s(time_s)
+    if not settings.exposure_s > 0:
+        raise ServoscopeError(f"{path}: exposure {settings.exposure_s} s: an exposure must be > 0 "
+                              "(leave it out when the shutter is not known)")
+    if period > 0 and settings.exposure_s > 1.001 * period:
+        raise ServoscopeError(f"{path}: exposure {1e3 * settings.exposure_s:.4g} ms is longer than the frame interval "
+                              f"({1e3 * period:.4g} ms): a frame cannot expose longer than it lasts; give the shutter "
+                              "time (e.g. 1/1000 s = 0.001), or leave it out when not known")
 
 
 def _check_readout(readout_s: float, frame_rate_hz: float | None, fields: bool) -> None:
