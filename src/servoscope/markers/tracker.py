@@ -1,18 +1,24 @@
 """Tracking two coloured markers (and a status LED) through a video.
 
+The first frame's blobs of each marker's colour are scored and the best
+pair taken, or the blobs the user pinned (:mod:`servoscope.markers.selection`).
 Per frame: find each marker's blob by colour inside a window around its
 predicted position (the whole frame when lost), then measure its centroid
 from a *soft* membership: each pixel's colour is unmixed between the marker's
 colour and the local background's, so a pixel half covered by the sticker
 counts one half. That makes the centroid subpixel, where a binary threshold
 (the paper's flag) moves by whole pixels as edge pixels flip (see
-:mod:`servoscope.markers.centroid`).
+:mod:`servoscope.markers.centroid`). The learned colours follow the frame's
+illumination (:mod:`servoscope.markers.illumination`); a rectangular sticker
+is measured over a support that follows its outline.
 
 A frame is *invalid*, with a reason, when a marker is not found, is partly
 hidden (its soft area or second moments differ from the marker's own
 reference), touches the image border, or its centroid lies outside the
-lens model's trusted region; and when the frame repeats the previous image
-(a duplicated frame) or its timestamp does not advance.
+lens model's trusted region; when the markers' separation departs from a
+rigid blade's (a track where most frames do is refused); and when the frame
+repeats the previous image (a duplicated frame) or its timestamp does not
+advance.
 """
 
 from __future__ import annotations
