@@ -344,8 +344,18 @@ def _print_model(result, truth: dict | None = None) -> None:
     dead_err_s = dead_time_stderr_s(result)
     dead_err = None if dead_err_s is None else 1e3 * dead_err_s
     true_dead = truth_model.get("dead_time_s")
-    rows.append((f"dead time (ms), {result.dead_time_source or 'not measured'}", dead_ms, dead_err, None,
+    estimates = result.dead_time_estimates
+    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
+    dead_ci = None if chosen is None else [1e3 * v for v in estimates[chosen]["ci95_s"]]
+    short = {"step": "step test", "phase": "dwells' phases"}
+    rows.append((f"dead time (ms), {short.get(chosen or '', 'not measured')}", dead_ms, dead_err, dead_ci,
                  None if true_dead is None else 1e3 * true_dead, "abs"))
+    other = {"step": "phase", "phase": "step"}.get(chosen or "")
+    if other and estimates.get(other) is not None:
+        e = estimates[other]
+        rows.append((f"  other estimate: {short[other]}",
+                     1e3 * e["value_s"], 1e3 * e["stderr_s"], [1e3 * v for v in e["ci95_s"]],
+                     None if true_dead is None else 1e3 * true_dead, "abs"))
     for name, value, err, ci, true, kind in rows:
         value_text, err_text = format_with_uncertainty(value, err)
         if err is None:

@@ -6,8 +6,7 @@ exposure / frame interval, and then one frame is partly lit; otherwise it
 falls in the unexposed gap between two exposures and every frame is clean.
 Over a campaign's videos the share of switches that lit a frame partly
 estimates the exposure's share of the frame interval (a binomial
-proportion, with its Wilson interval); two partly lit frames in a row show
-exposures that meet or overlap (a shutter of the whole interval).
+proportion, with its Wilson interval).
 
 A campaign of a handful of videos gives the exposure only coarsely (7
 videos: ±35 % of the interval); the estimate is reported with that
@@ -119,10 +118,6 @@ def estimate_exposure(switches: Iterable[tuple[int, float]], given_s: float | No
                                 "[camera] exposure_s", period, n, partly)
     if n == 0 or period is None:
         return ExposureEstimate(None, None, None, "unknown", "no LED switch found: nothing shows the shutter",
-                                period, n, partly)
-    if any(k >= 2 for k, _ in switches):
-        return ExposureEstimate(period, 0.0, (period, period), "LED",
-                                "two partly lit frames in a row: exposures end to end (the whole frame interval)",
                                 period, n, partly)
     low, high = _wilson(partly, n)
     if partly == 0:

@@ -8,7 +8,7 @@ notebook or a test can look at any of them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -201,6 +201,45 @@ def shared_t0_stderr(tests: list[TestSpec], tracks: dict[str, Track]) -> tuple[f
     frame = float(np.median(periods))
     shared = frame * math.sqrt((mean_centre - 0.5 * (low + high)) ** 2 + (high - low) ** 2 / 12.0)
     return shared, {label: math.sqrt(max(sigma**2 - shared**2, 0.0)) for label, sigma in own.items()}
+
+
+def step_dead_time_model_stderr(model, run_step: Callable[[object], object]) -> float:
+    """How much the step's dead time moves with the model's own uncertainty (s).
+
+    The step's dead time is fitted against the model's step shape (its gain
+    free): a natural frequency or damping that is off by its standard error
+    makes the motion start earlier or later. Propagated by central
+    differences over (ωn, ζ) with their covariance; 0 for models of other
+    forms (their shape parameters are not the physical ones).
+    """
+    import control  # deferred: only here
+
+    names = list(model.param_names)
+    if not {"gain", "natural_frequency_rad_s", "damping_ratio"} <= set(names):
+        return 0.0
+    idx = [names.index("natural_frequency_rad_s"), names.index("damping_ratio")]
+    cov = np.asarray(model.covariance, dtype=float)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov)):
+        return 0.0
+    base = {k: float(model.params[k]) for k in ("gain", "natural_frequency_rad_s", "damping_ratio")}
+    grad = []
+    for i, name in enumerate(("natural_frequency_rad_s", "damping_ratio")):
+        h = math.sqrt(max(cov[i, i], 0.0))
+        if h <= 0:
+            grad.append(0.0)
+            continue
+        taus = []
+        for sign in (1.0, -1.0):
+            p = dict(base)
+            p[name] += sign * h
+            wn, zeta = p["natural_frequency_rad_s"], p["damping_ratio"]
+            result = run_step(control.tf([p["gain"] * wn**2], [1.0, 2.0 * zeta * wn, wn**2]))
+            taus.append(getattr(result, "dead_time_s", None))
+        if any(t is None or not math.isfinite(t) for t in taus):
+            return 0.0
+        grad.append((taus[0] - taus[1]) / (2.0 * h))
+    g = np.asarray(grad)
+    return float(math.sqrt(max(g @ cov @ g, 0.0)))
 
 
 def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
@@ -547,16 +586,16 @@ def identify(
         elif track.n_valid < 10:
             warnings.append(f"{test.label}: step test has only {track.n_valid} valid frames; left out")
         else:
+            def run_step(tf, track=track, test=test, t0=t0):
+                return analyse_step(track.angle_time_s, track.angle_rad, t0_s=t0, step_size=test.amplitude,
+                                    valid=track.valid, model=tf, t0_stderr_s=_t0_stderr(test, track))
+
             try:
-                step = analyse_step(
-                    track.angle_time_s,
-                    track.angle_rad,
-                    t0_s=t0,
-                    step_size=test.amplitude,
-                    valid=track.valid,
-                    model=model.transfer_function,
-                    t0_stderr_s=_t0_stderr(test, track),
-                )
+                step = run_step(model.transfer_function)
+                if step.dead_time_s is not None and step.dead_time_stderr_s is not None:
+                    # Fitted against the model's shape: the model's uncertainty is the step's too.
+                    model_se = step_dead_time_model_stderr(model, run_step)
+                    step = replace(step, dead_time_stderr_s=math.hypot(step.dead_time_stderr_s, model_se))
             except ServoscopeError as exc:
                 warnings.append(f"{test.label}: step test left out: {exc}")
             else:

@@ -13,8 +13,8 @@ When the exposure is not known, nothing is assumed about it: a clean pair
 of frames leaves t0 anywhere between the two frame times (the widest gap,
 an instantaneous shutter), and one partly lit frame of level f leaves it
 between the frame time and f − ½ frame intervals from it (what exposures
-from nothing to the whole interval would give). Two partly lit frames in a
-row show exposures that overlap or meet end to end.
+from nothing to the whole interval would give, widened by the level's
+noise).
 
 Times here are those of the middle of each frame's exposure (the
 convention of :class:`~servoscope.markers.tracker.TrackerSettings`'s
@@ -62,9 +62,9 @@ class SwitchTime:
         The interval t0 can lie in: the unexposed gap (uniform) when no
         frame is partly lit, else ``t0_s ± 3·stderr_s``.
     how : str
-        "partial" (one partly lit frame dates it), "end to end" (two partly
-        lit frames of exposures that meet), "gap" (between two clean frames)
-        or "partial, exposure unknown".
+        "partial" (one partly lit frame dates it), "end to end" (exposures
+        that meet: frames k−1 and k together date it), "gap" (between two
+        clean frames) or "partial, exposure unknown".
     partial_frames : int
         How many frames at the switch are partly lit (0, 1 or 2): the
         evidence the exposure estimate pools over a campaign.
@@ -196,11 +196,10 @@ def led_switch_time(time_s: np.ndarray, level: np.ndarray,
     partial = [j for j, f in ((k - 1, f_before), (k, f_after)) if np.isfinite(f) and band < f < 1.0 - band]
     exposure = None if exposure_s is None else min(float(exposure_s), period)
 
+    # (Two partly lit frames in a row, when the exposure is not known, say nothing of it:
+    # exposures that meet light one frame partly and the next not at all; the second is
+    # noise, a codec's smear or a clipped LED.)
     end_to_end = exposure is not None and exposure >= 0.999 * period
-    if exposure is None and len(partial) == 2:
-        # Two partly lit frames in a row: exposures that meet (or overlap), as a
-        # shutter of a whole frame interval gives.
-        end_to_end, exposure = True, period
     if end_to_end and regular and np.isfinite(f_before) and np.isfinite(f_after):
         # Exposures end to end: the light of frames k−1 and k together is the time the LED
         # was lit after frame k−1's exposure began, wherever in the two the switch fell.
@@ -216,8 +215,11 @@ def led_switch_time(time_s: np.ndarray, level: np.ndarray,
         if exposure is not None and exposure > 0:
             sigma = math.hypot(noise * exposure, 1e-4 * period)
             return _dated(t_j - exposure / 2.0 + f * exposure, sigma, "partial", len(partial), period), None
-        # Exposure unknown: t0 = t_j + (f − ½)·e for some e in (0, period].
-        return _uniform(t_j, t_j + (f - 0.5) * period, "partial, exposure unknown", len(partial), period), None
+        # Exposure unknown: t0 = t_j + (f − ½)·e for some e in (0, period], f within the
+        # level's noise band of the one measured.
+        low = t_j + min(0.0, f - 0.5 - band) * period
+        high = t_j + max(0.0, f - 0.5 + band) * period
+        return _uniform(low, high, "partial, exposure unknown", len(partial), period), None
     if exposure is None:
         # Unknown exposure, two clean frames: anywhere between the two frame times
         # (the gap of an instantaneous shutter contains every other's).

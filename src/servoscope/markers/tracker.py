@@ -292,6 +292,10 @@ class Track:
             "camera_shake_px": analysis.get("camera_shake_px"),
             "t0_s": self.t0_s,
             "t0_uncertainty_s": self.t0_uncertainty_s,
+            # Where t0 can lie, and how many frames at the switch were partly lit (the
+            # exposure's evidence: none when the switch fell between two exposures).
+            "t0_interval_s": None if self.t0_earliest_s is None else [self.t0_earliest_s, self.t0_latest_s],
+            "led_partial_frames": self.led_partial_frames,
             "warnings": list(self.warnings),
         }
 

@@ -85,19 +85,39 @@ def _codec_cell(fit) -> str:
 
 
 def dead_time_stderr_s(result: "IdentificationResult") -> float | None:
-    """Standard error of ``result.dead_time_s``: the step test's fit, else the dwells' phases."""
-    if result.dead_time_source == "step test" and result.step is not None:
-        return result.step.dead_time_stderr_s
-    return result.model.dead_time_stderr_s
+    """Standard error of ``result.dead_time_s``, from the same estimate (step test or dwells' phases)."""
+    return result.dead_time_stderr_s
 
 
-def _dead_time_text(result: "IdentificationResult") -> str:
-    dead = result.dead_time_s
-    if dead is None:
+def dead_time_rows(result: "IdentificationResult") -> list[list[str]]:
+    """One row per dead-time estimate (dwells' phases, step): value ± stderr and 95 % interval, in ms."""
+    rows = []
+    estimates = result.dead_time_estimates
+    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
+    for key, label in (("phase", "dwells' phases"), ("step", "step test")):
+        e = estimates.get(key)
+        if e is None:
+            continue
+        value, err_text = format_with_uncertainty(1e3 * e["value_s"], 1e3 * e["stderr_s"])
+        note = " (the model's)" if key == chosen else ""
+        shared = e.get("shared_t0_stderr_s")
+        if shared:
+            note += f"; includes ±{1e3 * shared:.2f} ms of input-start timing the dwells may share"
+        rows.append([f"dead time τ (ms), from the {label}{note}",
+                     f"{value} ± {err_text}, 95 % {format_interval(1e3 * e['ci95_s'][0], 1e3 * e['ci95_s'][1], 1e3 * e['stderr_s'])}"])
+    return rows or [["dead time τ (ms)", "not measured"]]
+
+
+def exposure_text(result: "IdentificationResult") -> str:
+    """The camera exposure and where it came from, for the report."""
+    e = result.exposure
+    if e is None:
         return "—"
-    err = dead_time_stderr_s(result)
-    value, err_text = format_with_uncertainty(1e3 * dead, None if err is None else 1e3 * err)
-    return value if err is None else f"{value} ± {err_text}"
+    if e.value_s is None:
+        return f"unknown: {e.detail}"
+    if e.source == "given":
+        return f"{1e3 * e.value_s:.4g} ms (given)"
+    return f"{1e3 * e.value_s:.3g} ms, 95 % {1e3 * e.ci95_s[0]:.3g}–{1e3 * e.ci95_s[1]:.3g} ms, from the LED: {e.detail}"
 
 
 def build_report(result: "IdentificationResult", figures_dir: Path | None = None) -> str:
@@ -131,9 +151,13 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     header = (["parameter", "value", "standard error", "95 % interval"] + (["95 % bootstrap"] if boot else [])
               + (["dwell it rests on most: value without it"] if influence else []))
     rows = []
+    phase_dead = result.dead_time_estimates.get("phase")
     for name in model.param_names:
         lo_hi = model.ci95.get(name)
         err = model.stderr.get(name)
+        if name == "dead_time_s" and phase_dead is not None:
+            # With the input-start timing the dwells may share (not in the fit's own error).
+            lo_hi, err = phase_dead["ci95_s"], phase_dead["stderr_s"]
         value_text, err_text = format_with_uncertainty(model.params.get(name), err)
         row = [_PARAM_LABELS.get(name, name), value_text, err_text,
                "—" if lo_hi is None else format_interval(lo_hi[0], lo_hi[1], err)]
@@ -155,7 +179,8 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     other = [
         ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
         ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],
-        [f"dead time τ (ms), from the {result.dead_time_source or '—'}", _dead_time_text(result)],
+        *dead_time_rows(result),
+        ["camera exposure (shutter)", exposure_text(result)],
         ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db],
         ["residual RMS of the fit, phase (deg)", model.residual_rms_deg],
     ]
