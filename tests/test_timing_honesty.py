@@ -146,3 +146,46 @@ def test_short_shutter_given_intervals_hold_the_truth(tmp_path):
         assert lo <= truth["model"]["dead_time_s"] <= hi, (key, lo, hi)
     lo, hi = s["model"]["ci95"]["dead_time_s"]
     assert lo <= truth["model"]["dead_time_s"] <= hi
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "servoscope", *map(str, args)], capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.mark.parametrize("camera, expected", [
+    ("exposure_s = 0", "camera.exposure_s: must be > 0"),
+    ("exposure_s = 0.05", "longer than the frame interval"),  # 25 frames/s: 40 ms
+    ('timestamp = "centre"', "camera.timestamp"),
+])
+def test_identify_refuses_an_impossible_shutter(tmp_path, camera, expected):
+    from test_manifest import GOOD, _tiny_video
+
+    _tiny_video(tmp_path / "a.mp4")
+    _tiny_video(tmp_path / "b.mp4")
+    manifest = tmp_path / "campaign.toml"
+    manifest.write_text(f"[camera]\n{camera}\n" + GOOD)
+    out = tmp_path / "out"
+    proc = _cli("identify", manifest, "--out", out)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("servoscope: error: "), proc.stderr
+    assert expected in lines[0] and str(manifest.name) in lines[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("exposure, expected", [("0", "must be > 0"), ("0.05", "longer than the frame interval")])
+def test_track_refuses_an_impossible_shutter(tmp_path, exposure, expected):
+    from test_manifest import _tiny_video
+
+    video = _tiny_video(tmp_path / "a.mp4")
+    out = tmp_path / "t.csv"
+    proc = _cli("track", video, "--exposure", exposure, "--out", out)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("servoscope: error: "), proc.stderr
+    assert expected in lines[0] and "a.mp4" in lines[0]
+    assert not out.exists()

@@ -640,6 +640,9 @@ def track_video(
     if not (settings.shape_tolerance > 0 and settings.support_margin_px >= 1):
         raise ServoscopeError("shape_tolerance must be > 0 and support_margin_px >= 1")
     _check_readout(settings.readout_s, info.frame_rate_hz, fields is not None)
+    if info.frame_rate_hz:
+        # Before any work: the container's nominal frame (or field) interval.
+        _check_exposure(path, settings, np.arange(2) / (info.frame_rate_hz * (2 if fields is not None else 1)))
     engine = resolve_engine(settings)
     lead = _MarkerTracker("lead", lead_spec, settings)
     trail = _MarkerTracker("trail", trail_spec, settings)
