@@ -22,8 +22,11 @@ from ..errors import ServoscopeError
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
-from .scene import Scene, led_exposure_fraction, marker_angle_rad
+from .scene import Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
+
+#: A preset's default real-camera options, to tell which ones a campaign set.
+_DEFAULT = CampaignPreset(name="default", servo=None, frequencies_hz=(1.0,))
 
 __all__ = ["simulate_campaign", "frame_times_s", "step_metrics", "render_test"]
 
@@ -141,6 +144,12 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     fps = Fraction(preset.fps).limit_denominator(1_000_000)
     n = int(math.ceil(duration_s * fps))
     time_s = frame_times_s(n, fps)
+    written_s = time_s
+    centre_offset = preset.exposure_centre_offset_s
+    if centre_offset != 0.0:
+        # The written timestamp marks the exposure's start or end: the
+        # physics happens around the exposure's middle.
+        time_s = time_s + centre_offset
     pitch_instant = preset.servo.response(signal, time_s)
     pitch = exposure_averaged_response(preset.servo, signal, time_s, preset.exposure_s)
     # The blade moves during the exposure; a sensor integrates the moving
@@ -167,22 +176,36 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         rolling = {"lead_time_s": lead_time.tolist(), "trail_time_s": trail_time.tolist(),
                    "led_time_s": led_time.tolist()}
         rows = np.arange(preset.height, dtype=np.float64)
+    flicker = preset.flicker_depth > 0 and preset.flicker_hz > 0
+    shake = _shake_px(preset, n, noise_seed)
+    blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
                      preset=preset.x264_preset, gop=preset.gop) as writer:
         for i in range(n):
             if preset.readout_s > 0:
                 row_t = _row_time_s(time_s[i], rows, preset)
                 row_led = led_exposure_fraction(row_t, signal.t0_s, preset.exposure_s)
-                writer.write(renderer.render_rolling(pitch_at(row_t), row_led, i))
+                row_gain = (lamp_gain(row_t, preset.exposure_s, preset.flicker_hz, preset.flicker_depth)
+                            if flicker else None)
+                writer.write(renderer.render_rolling(pitch_at(row_t), row_led, i, row_gain))
+            elif blur is not None:
+                sub_t, sub_pitch, sub_dt = blur[0][i], blur[1][i], blur[2]
+                sub_led = led_exposure_fraction(sub_t, signal.t0_s, sub_dt)
+                sub_gain = lamp_gain(sub_t, sub_dt, preset.flicker_hz, preset.flicker_depth) if flicker else None
+                writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i])))
             else:
-                writer.write(renderer.render(float(pitch[i]), float(led[i]), i))
+                gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth)) \
+                    if flicker else 1.0
+                writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
     rec.update({
         "amplitude": signal.amplitude,
         "t0_s": signal.t0_s,
-        "time_s": time_s.tolist(),
+        "time_s": written_s.tolist(),
+        # Only said when it differs from the timestamp (timestamp_at != "middle").
+        **({"exposure_mid_s": time_s.tolist()} if centre_offset != 0.0 else {}),
         "angle_rad": angle.tolist(),
         "pitch_rad": pitch.tolist(),
         "pitch_at_frame_time_rad": pitch_instant.tolist(),
@@ -190,8 +213,53 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         "trail_xy_px": trail.tolist(),
         "led_level": led.tolist(),
         **rolling,
+        **({"shake_xy_px": shake.tolist()} if preset.shake_px > 0 else {}),
+        **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
+
+
+def _shake_px(preset: CampaignPreset, n: int, noise_seed: int) -> np.ndarray:
+    """Per-frame translation of the whole picture (camera shake), recorded pixels, shape (n, 2).
+
+    Seeded white noise smoothed by a Gaussian of ``shake_smooth_frames``,
+    scaled to an RMS of ``shake_px`` per axis; zeros when ``shake_px`` is 0.
+    """
+    if preset.shake_px <= 0 or n == 0:
+        return np.zeros((n, 2))
+    # Its own stream (the test's noise seed, tagged): the other draws keep their values.
+    rng = np.random.default_rng([noise_seed, 0x5EA4E])
+    sigma = float(preset.shake_smooth_frames)
+    pad = int(math.ceil(4 * sigma))
+    white = rng.standard_normal((n + 2 * pad, 2))
+    k = np.arange(-pad, pad + 1)
+    kernel = np.exp(-0.5 * (k / sigma) ** 2)
+    smooth = np.stack([np.convolve(white[:, a], kernel, mode="valid") for a in range(2)], axis=1)
+    smooth -= smooth.mean(axis=0)
+    rms = np.sqrt(np.mean(smooth**2, axis=0))
+    return smooth * (preset.shake_px / np.where(rms > 0, rms, 1.0))
+
+
+def _blur_samples(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray, scene: Scene
+                  ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Sub-exposure instants and pitches for real motion blur: (times (n, m), pitches (n, m), sub-interval).
+
+    ``m`` is chosen so that no blade point (the farthest, a chord from the
+    pivot) moves more than ``blur_step_px`` between two samples in any frame,
+    capped at ``blur_max_samples``; each sample is the pose at the middle of
+    its sub-interval (exposure-averaged over the sub-interval's short span).
+    """
+    e = preset.exposure_s
+    if e <= 0:
+        return time_s[:, None], preset.servo.response(signal, time_s)[:, None], 0.0
+    probe = 64
+    edges = time_s[:, None] + e * (np.arange(probe + 1) / probe - 0.5)[None, :]
+    p = preset.servo.response(signal, edges.ravel()).reshape(edges.shape)
+    travel = float(np.max(np.sum(np.abs(np.diff(p, axis=1)), axis=1))) * scene.chord_px
+    m = int(min(preset.blur_max_samples, max(1, math.ceil(travel / preset.blur_step_px))))
+    sub_t = time_s[:, None] + e * ((np.arange(m) + 0.5) / m - 0.5)[None, :]
+    sub_p = preset.servo.response(signal, sub_t.ravel()).reshape(sub_t.shape)
+    return sub_t, sub_p, e / m
 
 
 def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, *,
@@ -227,6 +295,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     """
     base = get_preset(preset)
     allowed = {f.name for f in fields(CampaignPreset)} - {"name"}
+    # Scene settings (clutter, sticker_shape, ...) go to the scene.
+    scene_fields = {f.name for f in fields(Scene)} - {"width", "height"}
+    scene_kw = {k: overrides.pop(k) for k in list(overrides) if k in scene_fields and k not in allowed}
     unknown = set(overrides) - allowed
     if unknown:
         raise ServoscopeError(f"unknown simulation setting(s) {sorted(unknown)} (known: {', '.join(sorted(allowed))})")
@@ -236,7 +307,10 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     p = replace(base, **overrides)
     suffix = container_suffixes(p.codec)[0]
     fps = Fraction(p.fps).limit_denominator(1_000_000)
-    scene = p.scene if p.scene is not None else Scene.for_size(p.width, p.height, background_seed=seed)
+    if p.scene is not None:
+        scene = replace(p.scene, **scene_kw) if scene_kw else p.scene
+    else:
+        scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
     camera = p.camera()
 
     out = Path(outdir)
@@ -260,6 +334,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         # frame dates it; when it falls between exposures it is only known
         # to within the gap, 1/fps - exposure_s.
         frac = rng.uniform(0.02, 0.98)
+        if p.t0_frame_phase is not None:
+            frac = p.t0_frame_phase  # drawn all the same: the noise seeds keep their values
         t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
         noise_seed = int(rng.integers(0, 2**63 - 1))
         if kind == "sine":
@@ -300,6 +376,10 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,
             # Only a rolling shutter is said: a global shutter's truth stays as it was.
             **({"readout_s": p.readout_s} if p.readout_s > 0 else {}),
+            # Real-camera options, only when set (default truth unchanged).
+            **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "shake_px", "shake_smooth_frames",
+                                          "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure")
+               if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
         "input_units": p.input_units,
@@ -314,7 +394,9 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
         f"calibration = {_toml_str('camera.json')}",
         # The shutter time is a camera setting the operator knows; the LED's
         # partly lit frame gives the input's start only if it is known.
-        *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 else []),
+        *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 and p.manifest_exposure else []),
+        # Said only when the timestamp is not the exposure's middle (the default).
+        *([f"timestamp = {_toml_str(p.timestamp_at)}"] if p.timestamp_at != "middle" else []),
         # Likewise the sensor's readout time (from its data sheet or measured).
         *([f"readout_s = {_toml_float(p.readout_s)}"] if p.readout_s > 0 else []),
         "",

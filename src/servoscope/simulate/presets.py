@@ -14,7 +14,10 @@ from ..errors import ServoscopeError
 from .scene import REFERENCE_SIZE, Scene
 from .servo import ServoModel
 
-__all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "get_preset"]
+__all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "TIMESTAMP_AT", "get_preset"]
+
+#: What a frame timestamp may mark: the middle (default), start or end of its exposure.
+TIMESTAMP_AT = ("middle", "start", "end")
 
 #: The paper's fit: G(s) = 0.23·37² / (s² + 2·0.65·37·s + 37²), dead time 85 ms.
 PAPER_SERVO = ServoModel(num=(0.23 * 37.0**2,), den=(1.0, 2.0 * 0.65 * 37.0, 37.0**2), dead_time_s=0.085)
@@ -81,6 +84,36 @@ class CampaignPreset:
     scene : Scene or None
         What is filmed; None means ``Scene.for_size(width, height)`` with the
         campaign seed as background seed.
+    flicker_hz, flicker_depth : float
+        Lamps whose light is ``1 + depth·sin(2π·flicker_hz·t)`` (mains
+        lighting: twice the mains frequency), integrated over each exposure
+        (each row's, with a rolling shutter); the lit LED shines its own
+        light and does not flicker. depth 0 (the default): steady lamps.
+    shake_px : float
+        Camera shake: RMS of a smooth, seeded translation of the whole
+        picture, per axis, recorded pixels (0, the default: a rigid tripod).
+    shake_smooth_frames : float
+        Correlation length of the shake, frames (Gaussian smoothing of white
+        noise).
+    t0_frame_phase : float or None
+        Where in its frame interval the input (and the LED switch) starts,
+        as a fraction in [0, 1), the same for every test; None (the default)
+        draws it per test, uniform in [0.02, 0.98).
+    manifest_exposure : bool
+        Whether campaign.toml says ``exposure_s`` (False: a user who does not
+        know the shutter time).
+    motion_blur : bool
+        Render the real motion blur of the exposure (the mean of sub-exposure
+        renders) instead of the exposure-averaged pose; truth stays the
+        exposure-averaged pose. Global shutter only.
+    blur_step_px : float
+        Motion blur: the most a blade point moves between two sub-exposure
+        renders, pixels.
+    blur_max_samples : int
+        Motion blur: at most this many renders per frame.
+    timestamp_at : {"middle", "start", "end"}
+        Which instant of the exposure the written frame timestamp marks
+        (campaign.toml ``[camera] timestamp`` says it when not "middle").
     """
 
     name: str
@@ -109,8 +142,19 @@ class CampaignPreset:
     principal_offset_px: tuple[float, float] = (3.2, -2.1)
     dist_coeffs: tuple[float, ...] = (-0.08, 0.02, 4e-4, -3e-4, 0.0)
     scene: Scene | None = field(default=None)
+    flicker_hz: float = 0.0
+    flicker_depth: float = 0.0
+    shake_px: float = 0.0
+    shake_smooth_frames: float = 5.0
+    t0_frame_phase: float | None = None
+    manifest_exposure: bool = True
+    motion_blur: bool = False
+    blur_step_px: float = 0.5
+    blur_max_samples: int = 32
+    timestamp_at: str = "middle"
 
     def __post_init__(self) -> None:
+        self._check_camera_options()
         freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):
             raise ServoscopeError("frequencies_hz must be positive")
@@ -130,6 +174,37 @@ class CampaignPreset:
             raise ServoscopeError(f"readout_s must be >= 0 and shorter than the frame interval, not {self.readout_s!r}")
         if self.scene is not None and (self.scene.width, self.scene.height) != (self.width, self.height):
             raise ServoscopeError("the scene's size differs from the video size")
+
+    def _check_camera_options(self) -> None:
+        """Validate the real-camera options (flicker, shake, blur, timestamps)."""
+        if not (math.isfinite(self.flicker_hz) and self.flicker_hz >= 0):
+            raise ServoscopeError(f"flicker_hz must be >= 0, not {self.flicker_hz!r}")
+        if not 0.0 <= self.flicker_depth < 1.0:
+            raise ServoscopeError(f"flicker_depth must be in [0, 1), not {self.flicker_depth!r}")
+        if not (math.isfinite(self.shake_px) and self.shake_px >= 0):
+            raise ServoscopeError(f"shake_px must be >= 0, not {self.shake_px!r}")
+        if not self.shake_smooth_frames > 0:
+            raise ServoscopeError(f"shake_smooth_frames must be > 0, not {self.shake_smooth_frames!r}")
+        if self.t0_frame_phase is not None and not 0.0 <= self.t0_frame_phase < 1.0:
+            raise ServoscopeError(f"t0_frame_phase must be in [0, 1) or None, not {self.t0_frame_phase!r}")
+        if not self.blur_step_px > 0 or int(self.blur_max_samples) != self.blur_max_samples \
+                or self.blur_max_samples < 1:
+            raise ServoscopeError("blur_step_px must be > 0 and blur_max_samples an integer >= 1")
+        if self.timestamp_at not in TIMESTAMP_AT:
+            raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
+        if self.readout_s > 0:
+            # The row-by-row renderer draws one pose per row; blur would need
+            # sub-exposures per row, shake a per-row shift of the background.
+            unsupported = [name for name, on in (("motion_blur", self.motion_blur), ("shake_px", self.shake_px > 0))
+                           if on]
+            if unsupported:
+                raise ServoscopeError(f"{' and '.join(unsupported)} cannot be combined with a rolling shutter "
+                                      f"(readout_s > 0): use a global shutter (readout_s=0)")
+
+    @property
+    def exposure_centre_offset_s(self) -> float:
+        """Exposure middle minus the written frame timestamp, seconds (by ``timestamp_at``)."""
+        return {"middle": 0.0, "start": 0.5, "end": -0.5}[self.timestamp_at] * self.exposure_s
 
     def dwell_duration_s(self, frequency_hz: float, t0_s: float) -> float:
         """Length of the sine dwell at ``frequency_hz`` that starts at ``t0_s``."""

@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import functools
 
+from dataclasses import replace
+
+import cv2
 import numpy as np
 import scipy.special
 
@@ -295,8 +298,17 @@ def polygon_coverage(vertices_xy_px: np.ndarray, image_size: tuple[int, int] | N
 def _background(scene: Scene) -> np.ndarray:
     # Campaigns render many videos of one scene: build its background once.
     bg = scene.background()
+    _draw_clutter(bg, scene, np.zeros(2))
     bg.flags.writeable = False
     return bg
+
+
+def _draw_clutter(image: np.ndarray, scene: Scene, shift_px: np.ndarray) -> None:
+    """Composite the scene's static clutter, shifted by ``shift_px``, into ``image`` (float32 RGB)."""
+    for item in scene.clutter:
+        acc, x0, y0, sign = _accumulated(item.outline_px() + shift_px, scene.width, scene.height)
+        if acc.shape[0] > 0 and acc.shape[1] > 1:
+            _composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
 
 
 def _gaussian_table() -> np.ndarray:
@@ -348,8 +360,9 @@ class FrameRenderer:
         k = scene.sticker_vertices
         ang = 2.0 * np.pi * np.arange(k) / k
         unit = np.stack([np.cos(ang), np.sin(ang)], axis=1)
-        rs, rl = 0.5 * scene.sticker_diameter_px, 0.5 * scene.led_diameter_px
-        self._parts_uv = [scene.blade_outline_uv(), lead_uv + rs * unit, trail_uv + rs * unit]
+        rl = 0.5 * scene.led_diameter_px
+        sticker = scene.sticker_outline_uv()
+        self._parts_uv = [scene.blade_outline_uv(), lead_uv + sticker, trail_uv + sticker]
         self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour)]
         if scene.led_offset_px != 0:
             # An LED off the chord sits in a dark housing (the blade's colour) on
@@ -370,30 +383,76 @@ class FrameRenderer:
             xy = self.camera.distort_points(xy)
         return np.split(xy, self._splits)
 
-    def composite(self, pitch_rad: float, led_level: float) -> np.ndarray:
+    def _restore_lit(self, gain: np.ndarray | float, shift_px: tuple[float, float]) -> None:
+        """Fill the whole working buffer with the background, shifted and scaled by the lamps' gain."""
+        h, w = self.scene.height, self.scene.width
+        g = np.asarray(gain, dtype=np.float32)
+        if shift_px == (0.0, 0.0):
+            np.multiply(self._bg, g.reshape(-1, 1, 1) if g.ndim else g, out=self._work)
+        else:
+            # The plain background is smooth (blotches tenths of the image
+            # wide): cubic interpolation shifts it to ~1e-3 DN. Clutter has
+            # sharp edges, which interpolation would not move exactly: it is
+            # drawn again, shifted, with exact coverage.
+            m = np.array([[1.0, 0.0, shift_px[0]], [0.0, 1.0, shift_px[1]]])
+            plain = _background(replace(self.scene, clutter=()))
+            self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), m, (w, h), flags=cv2.INTER_CUBIC,
+                                           borderMode=cv2.BORDER_REFLECT)
+            _draw_clutter(self._work, self.scene, np.array(shift_px))
+            self._work *= g
+        self._dirty = [(0, h, 0, w)]
+
+    def composite(self, pitch_rad: float, led_level: float, lamp_gain: float = 1.0,
+                  shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """The noise-free frame, float32 DN, shape (height, width, 3).
 
         The returned array is the renderer's working buffer: copy it before
         the next call if it must be kept.
+
+        Parameters
+        ----------
+        pitch_rad : float
+            Blade pitch.
+        led_level : float
+            Lit fraction of the exposure, in [0, 1].
+        lamp_gain : float
+            Mean light of the lamps over the exposure (flicker): scales
+            everything the lamps light, not the lit LED. 1 draws only what
+            moves over the cached background.
+        shift_px : (float, float)
+            Translation of the whole picture, recorded pixels (camera shake).
         """
         if not 0.0 <= led_level <= 1.0:
             raise ServoscopeError(f"led_level must be in [0, 1], not {led_level}")
-        for (y0, y1, x0, x1) in self._dirty:
-            self._work[y0:y1, x0:x1] = self._bg[y0:y1, x0:x1]
-        self._dirty = []
-        led_colour = self._led_off + led_level * (self._led_on - self._led_off)
-        colours = self._colours + [led_colour]
+        shift_px = (float(shift_px[0]), float(shift_px[1]))
+        lit = lamp_gain != 1.0 or shift_px != (0.0, 0.0)
+        if lit:
+            self._restore_lit(lamp_gain, shift_px)
+            # The dark LED is seen by the lamps' light; a lit one shines its own.
+            led_colour = led_level * self._led_on + (1.0 - led_level) * lamp_gain * self._led_off
+            colours = [c * lamp_gain for c in self._colours] + [led_colour]
+        else:
+            for (y0, y1, x0, x1) in self._dirty:
+                self._work[y0:y1, x0:x1] = self._bg[y0:y1, x0:x1]
+            self._dirty = []
+            led_colour = self._led_off + led_level * (self._led_on - self._led_off)
+            colours = self._colours + [led_colour]
         w, h = self.scene.width, self.scene.height
-        for xy, colour in zip(self.outlines_px(pitch_rad), colours):
+        outlines = self.outlines_px(pitch_rad)
+        if shift_px != (0.0, 0.0):
+            outlines = [xy + np.array(shift_px) for xy in outlines]
+        for xy, colour in zip(outlines, colours):
             acc, x0, y0, sign = _accumulated(xy, w, h)
             ny, nx = acc.shape[0], acc.shape[1] - 1
             if nx <= 0 or ny <= 0:
                 continue
             _composite(self._work, acc, x0, y0, colour.astype(np.float64), sign)
-            self._dirty.append((y0, y0 + ny, x0, x0 + nx))
+            if not lit:
+                self._dirty.append((y0, y0 + ny, x0, x0 + nx))
         return self._work
 
-    def composite_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray) -> np.ndarray:
+    def composite_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray,
+                          row_lamp_gain: np.ndarray | None = None) -> np.ndarray:
         """The noise-free frame of a rolling shutter: row y shows the scene at its own time.
 
         Every moving part is drawn row by row, each row with the part's
@@ -409,6 +468,9 @@ class FrameRenderer:
             averaged over its exposure).
         row_led_level : ndarray, shape (height,)
             Lit fraction of each row's exposure, in [0, 1].
+        row_lamp_gain : ndarray, shape (height,), optional
+            Mean light of flickering lamps over each row's exposure (the
+            bands a rolling shutter shows); None: steady lamps.
 
         Returns
         -------
@@ -422,11 +484,21 @@ class FrameRenderer:
             raise ServoscopeError(f"composite_rolling: need one pitch and one LED level per row ({h})")
         if not (np.all(level >= 0.0) and np.all(level <= 1.0)):
             raise ServoscopeError("row_led_level must be in [0, 1]")
-        for (y0, y1, x0, x1) in self._dirty:
-            self._work[y0:y1, x0:x1] = self._bg[y0:y1, x0:x1]
-        self._dirty = []
-        row_colours = [np.broadcast_to(c, (h, 3)) for c in self._colours]
-        row_colours.append(self._led_off[None, :] + level[:, None] * (self._led_on - self._led_off)[None, :])
+        if row_lamp_gain is None:
+            for (y0, y1, x0, x1) in self._dirty:
+                self._work[y0:y1, x0:x1] = self._bg[y0:y1, x0:x1]
+            self._dirty = []
+            row_colours = [np.broadcast_to(c, (h, 3)) for c in self._colours]
+            row_colours.append(self._led_off[None, :] + level[:, None] * (self._led_on - self._led_off)[None, :])
+        else:
+            gain = np.asarray(row_lamp_gain, dtype=np.float64)
+            if gain.shape != (h,) or not np.all(np.isfinite(gain)):
+                raise ServoscopeError(f"composite_rolling: need one finite lamp gain per row ({h})")
+            self._restore_lit(gain, (0.0, 0.0))
+            row_colours = [gain[:, None] * c[None, :] for c in self._colours]
+            row_colours.append(level[:, None] * self._led_on[None, :]
+                               + ((1.0 - level) * gain)[:, None] * self._led_off[None, :])
+        keep_dirty = row_lamp_gain is None
         # The rows a part can reach: its extent at the frame's extreme pitches,
         # widened by 2 px for the curvature of the arcs its vertices follow
         # in between (R·δp²/8, far below a pixel for a frame's motion).
@@ -450,10 +522,12 @@ class FrameRenderer:
             sign = -1.0 if _signed_area(xy[0]) >= 0 else 1.0
             _composite_rows(self._work, xs, yy, rows.astype(np.int64), x0, x1 - x0 + 1,
                             np.ascontiguousarray(colours[rows], dtype=np.float64), sign)
-            self._dirty.append((y0, y1 + 1, x0, x1 + 1))
+            if keep_dirty:
+                self._dirty.append((y0, y1 + 1, x0, x1 + 1))
         return self._work
 
-    def render_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray, frame_index: int = 0) -> np.ndarray:
+    def render_rolling(self, row_pitch_rad: np.ndarray, row_led_level: np.ndarray, frame_index: int = 0,
+                       row_lamp_gain: np.ndarray | None = None) -> np.ndarray:
         """One recorded rolling-shutter frame: :meth:`composite_rolling`, seeded noise, uint8.
 
         Parameters
@@ -462,18 +536,23 @@ class FrameRenderer:
             See :meth:`composite_rolling`.
         frame_index : int
             Index of the frame (selects its noise, as in :meth:`render`).
+        row_lamp_gain : ndarray, shape (height,), optional
+            See :meth:`composite_rolling`.
 
         Returns
         -------
         ndarray of uint8, shape (height, width, 3)
         """
-        work = self.composite_rolling(row_pitch_rad, row_led_level)
+        return self._finished(self.composite_rolling(row_pitch_rad, row_led_level, row_lamp_gain), frame_index)
+
+    def _finished(self, work: np.ndarray, frame_index: int) -> np.ndarray:
         out = np.empty(work.shape, dtype=np.uint8)
         state = np.random.SeedSequence([self.noise_seed, int(frame_index)]).generate_state(1, np.uint64)[0]
         _finish(work, out, self._noise_table, np.uint64(state))
         return out
 
-    def render(self, pitch_rad: float, led_level: float, frame_index: int = 0) -> np.ndarray:
+    def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,
+               shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """One recorded frame: composite, add seeded noise, round to uint8.
 
         Parameters
@@ -484,17 +563,51 @@ class FrameRenderer:
             Fraction of the exposure during which the LED was lit, in [0, 1].
         frame_index : int
             Index of the frame (selects its noise).
+        lamp_gain, shift_px : float, (float, float)
+            Lamps' flicker and camera shake, see :meth:`composite`.
 
         Returns
         -------
         ndarray of uint8, shape (height, width, 3)
             RGB frame.
         """
-        work = self.composite(pitch_rad, led_level)
-        out = np.empty(work.shape, dtype=np.uint8)
-        state = np.random.SeedSequence([self.noise_seed, int(frame_index)]).generate_state(1, np.uint64)[0]
-        _finish(work, out, self._noise_table, np.uint64(state))
-        return out
+        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px), frame_index)
+
+    def render_blurred(self, pitch_rad: np.ndarray, led_lit: np.ndarray, frame_index: int = 0,
+                       lamp_gain: np.ndarray | None = None, shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """One recorded frame with real motion blur: the mean of sub-exposure composites.
+
+        A sensor integrates the moving blade: sampling the exposure at
+        ``m`` instants (equal sub-intervals, each drawn at its middle) and
+        averaging the noise-free frames smears the stickers along their arcs
+        as a long shutter does.
+
+        Parameters
+        ----------
+        pitch_rad : ndarray, shape (m,)
+            Pitch at the middle of each sub-interval.
+        led_lit : ndarray, shape (m,)
+            Lit fraction of each sub-interval, in [0, 1].
+        frame_index : int
+            Index of the frame (selects its noise).
+        lamp_gain : ndarray, shape (m,), optional
+            The lamps' light in each sub-interval; None: steady.
+        shift_px : (float, float)
+            Camera shake (the same throughout the exposure).
+
+        Returns
+        -------
+        ndarray of uint8, shape (height, width, 3)
+        """
+        pitch = np.asarray(pitch_rad, dtype=np.float64).ravel()
+        lit = np.asarray(led_lit, dtype=np.float64).ravel()
+        gain = np.ones_like(pitch) if lamp_gain is None else np.asarray(lamp_gain, dtype=np.float64).ravel()
+        if pitch.size == 0 or lit.shape != pitch.shape or gain.shape != pitch.shape:
+            raise ServoscopeError("render_blurred: need one pitch, LED level and lamp gain per sample")
+        total = np.zeros((self.scene.height, self.scene.width, 3), dtype=np.float64)
+        for p, level, g in zip(pitch, lit, gain):
+            total += self.composite(float(p), float(level), float(g), shift_px)
+        return self._finished((total / pitch.size).astype(np.float32), frame_index)
 
 
 def render_frame(scene: Scene, pitch_rad: float, led_level: float = 1.0, *,

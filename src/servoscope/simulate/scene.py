@@ -22,7 +22,10 @@ import numpy as np
 from ..errors import ServoscopeError
 
 __all__ = [
+    "Clutter",
     "Scene",
+    "STICKER_SHAPES",
+    "lamp_gain",
     "colour_rgb",
     "led_exposure_fraction",
     "marker_angle_rad",
@@ -80,6 +83,93 @@ def led_exposure_fraction(time_s: np.ndarray | float, switch_off_s: float, expos
     if exposure_s <= 0:
         return np.where(t < switch_off_s, 1.0, 0.0)
     return np.clip((switch_off_s - (t - 0.5 * exposure_s)) / exposure_s, 0.0, 1.0)
+
+
+def lamp_gain(time_s: np.ndarray | float, exposure_s: float, flicker_hz: float, flicker_depth: float) -> np.ndarray:
+    """Mean gain of flickering lamps over each exposure.
+
+    The lamps' light is ``1 + depth·sin(2π f t)``; a frame exposed over
+    ``[t - e/2, t + e/2]`` collects its mean, ``1 + depth·sin(2π f t)·sinc(f e)``
+    (``sinc(x) = sin(πx)/(πx)``): a shutter of whole flicker periods sees none.
+
+    Parameters
+    ----------
+    time_s : array_like
+        Exposure centres, seconds.
+    exposure_s : float
+        Exposure time e, seconds (0 = instantaneous).
+    flicker_hz : float
+        Flicker frequency f, Hz (mains lamps: twice the mains frequency).
+    flicker_depth : float
+        Modulation depth, in [0, 1).
+    """
+    t = np.asarray(time_s, dtype=float)
+    return 1.0 + flicker_depth * np.sin(2.0 * np.pi * flicker_hz * t) * np.sinc(flicker_hz * exposure_s)
+
+
+#: Sticker shapes :class:`Scene` draws.
+STICKER_SHAPES = ("disc", "square", "strip")
+
+# A strip's default length / width.
+_STRIP_ASPECT = 4.0
+
+_CLUTTER_SHAPES = ("box", "disc")
+
+
+@dataclass(frozen=True)
+class Clutter:
+    """A static object in the scene behind the blade (a box, a cable drum, a tool).
+
+    Drawn with exact area coverage into the background, in recorded-image
+    pixel coordinates (where it is in the video), lit by the lamps.
+
+    Parameters
+    ----------
+    colour : str
+        "#rrggbb" or a CSS colour name.
+    centre_px : (float, float)
+        Centre, recorded-image pixels (x right, y down).
+    size_px : (float, float)
+        Width and height before rotation (a disc's two diameters), pixels.
+    angle_rad : float
+        Rotation, counter-clockwise as seen in the image.
+    shape : {"box", "disc"}
+        A rectangle or an ellipse.
+    """
+
+    colour: str
+    centre_px: tuple[float, float]
+    size_px: tuple[float, float]
+    angle_rad: float = 0.0
+    shape: str = "box"
+
+    def __post_init__(self) -> None:
+        colour_rgb(self.colour)  # validates
+        if self.shape not in _CLUTTER_SHAPES:
+            raise ServoscopeError(f"clutter: shape must be one of {', '.join(_CLUTTER_SHAPES)}, not {self.shape!r}")
+        cx, cy = (float(v) for v in self.centre_px)
+        w, h = (float(v) for v in self.size_px)
+        if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(self.angle_rad)):
+            raise ServoscopeError("clutter: centre_px and angle_rad must be finite")
+        if not (w > 0 and h > 0 and math.isfinite(w) and math.isfinite(h)):
+            raise ServoscopeError(f"clutter: size_px must be positive, not {self.size_px!r}")
+        object.__setattr__(self, "centre_px", (cx, cy))
+        object.__setattr__(self, "size_px", (w, h))
+        object.__setattr__(self, "angle_rad", float(self.angle_rad))
+
+    def outline_px(self) -> np.ndarray:
+        """Outline, recorded-image pixels, shape (n, 2): its area centroid is ``centre_px``."""
+        w, h = self.size_px
+        if self.shape == "box":
+            local = 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
+        else:
+            ang = 2.0 * np.pi * np.arange(256) / 256
+            local = 0.5 * np.stack([w * np.cos(ang), h * np.sin(ang)], axis=1)
+        c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
+        # Counter-clockwise on screen, where y points down.
+        x = local[:, 0] * c + local[:, 1] * s
+        y = -local[:, 0] * s + local[:, 1] * c
+        return np.stack([x + self.centre_px[0], y + self.centre_px[1]], axis=1)
 
 
 def _densify(closed_xy: np.ndarray, max_segment_px: float) -> np.ndarray:
@@ -144,6 +234,15 @@ class Scene:
         Number of blotches.
     background_seed : int
         Seed of the blotch pattern.
+    clutter : tuple of Clutter (or dicts of its fields)
+        Static objects drawn into the background (not scaled by
+        :meth:`for_size`: they are given in the image's own pixels).
+    sticker_shape : {"disc", "square", "strip"}
+        Disc of diameter ``sticker_diameter_px``; square of that side;
+        rectangle of that width across the chord. All turn with the blade.
+    sticker_aspect : float or None
+        Length along the chord / width across it: a disc becomes an ellipse,
+        a square a rectangle. None: 1 for "disc" and "square", 4 for "strip".
     max_segment_px : float
         Longest polygon edge before lens distortion (edges are densified so
         that the distorted outline follows the lens's curves).
@@ -173,6 +272,9 @@ class Scene:
     blotch_count: int = 14
     background_seed: int = 0
     max_segment_px: float = 2.0
+    clutter: tuple[Clutter, ...] = ()
+    sticker_shape: str = "disc"
+    sticker_aspect: float | None = None
 
     def __post_init__(self) -> None:
         if self.width < 2 or self.height < 2:
@@ -192,6 +294,17 @@ class Scene:
                      "background_top", "background_bottom"):
             colour_rgb(getattr(self, name))  # validates
         object.__setattr__(self, "pivot_xy_px", (float(self.pivot_xy_px[0]), float(self.pivot_xy_px[1])))
+        items = (self.clutter,) if isinstance(self.clutter, (Clutter, dict)) else tuple(self.clutter)
+        try:
+            clutter = tuple(c if isinstance(c, Clutter) else Clutter(**c) for c in items)
+        except TypeError as e:
+            raise ServoscopeError(f"scene: clutter items are Clutter or dicts of its fields ({e})") from None
+        object.__setattr__(self, "clutter", clutter)
+        if self.sticker_shape not in STICKER_SHAPES:
+            raise ServoscopeError(
+                f"scene: sticker_shape must be one of {', '.join(STICKER_SHAPES)}, not {self.sticker_shape!r}")
+        if self.sticker_aspect is not None and not (self.sticker_aspect > 0 and math.isfinite(self.sticker_aspect)):
+            raise ServoscopeError(f"scene: sticker_aspect must be > 0, not {self.sticker_aspect!r}")
 
     @classmethod
     def for_size(cls, width: int, height: int, **overrides) -> "Scene":
@@ -249,6 +362,27 @@ class Scene:
     def led_centre_uv(self) -> np.ndarray:
         """LED centre in the blade frame."""
         return np.array([self._u_from_le(self.led_chord_fraction), self.led_offset_px])
+
+    def sticker_outline_uv(self) -> np.ndarray:
+        """One sticker's outline about its centre, blade frame, shape (n, 2).
+
+        Its area centroid is exactly the origin (a regular polygon, or a
+        rectangle densified to ``max_segment_px`` edges so that the lens
+        bends it), counter-clockwise in the blade frame.
+        """
+        r = 0.5 * self.sticker_diameter_px
+        aspect = self.sticker_aspect if self.sticker_aspect is not None else (
+            _STRIP_ASPECT if self.sticker_shape == "strip" else 1.0)
+        if self.sticker_shape == "disc":
+            k = self.sticker_vertices
+            ang = 2.0 * np.pi * np.arange(k) / k
+            unit = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+            return r * unit if aspect == 1.0 else r * unit * np.array([aspect, 1.0])
+        a, b = r * aspect, r
+        rect = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])
+        # Densify about the corners symmetrically (every edge cut in equal
+        # pieces) so that the centroid stays exactly at the origin.
+        return _densify(rect, self.max_segment_px)
 
     def disk_outline(self, centre_xy_px: np.ndarray, diameter_px: float) -> np.ndarray:
         """Regular ``sticker_vertices``-gon (centroid exactly at the centre), ideal pixels, CCW on screen."""
