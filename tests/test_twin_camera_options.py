@@ -248,3 +248,25 @@ def test_rolling_shutter_flicker_bands_follow_the_row_times(tmp_path):
     want = lamp_gain(truth["time_s"][0] + 0.008 * rows / H, 0.002, f, d)
     assert np.abs(ratio - want).max() < 0.02  # 8-bit rounding: 1 DN in ~100
     assert np.ptp(want) > 0.3  # the band is there to see
+
+
+def test_simulate_cli_passes_the_options_and_refuses_bad_combinations(tmp_path):
+    from click.testing import CliRunner
+
+    from servoscope.cli import cli
+
+    runner = CliRunner()
+    out = tmp_path / "c"
+    res = runner.invoke(cli, ["simulate", str(out), "--preset", "quick", "--codec", "raw", "--flicker-hz", "100",
+                              "--flicker-depth", "0.2", "--t0-phase", "0.25", "--no-manifest-exposure",
+                              "--timestamp-at", "end", "--sticker-shape", "square"])
+    assert res.exit_code == 0, res.output
+    truth = json.loads((out / "truth.json").read_text())
+    manifest = tomllib.loads((out / "campaign.toml").read_text())
+    assert truth["video"]["flicker_hz"] == 100.0 and truth["video"]["flicker_depth"] == 0.2
+    assert truth["video"]["t0_frame_phase"] == 0.25 and truth["video"]["timestamp_at"] == "end"
+    assert manifest["camera"] == {"calibration": "camera.json", "timestamp": "end"}
+    res = runner.invoke(cli, ["simulate", str(tmp_path / "bad"), "--preset", "quick", "--readout", "0.005",
+                              "--shake", "0.5"])
+    assert res.exit_code != 0 and "rolling shutter" in str(res.exception or res.output)
+    assert not (tmp_path / "bad").exists()

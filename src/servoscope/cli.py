@@ -109,13 +109,35 @@ def cli() -> None:
               help="Rolling-shutter readout time, s, < the frame interval (preset's: 0, a global shutter).")
 @click.option("--gop", type=click.IntRange(min=1),
               help="Frames from one I-frame to the next (codec's default: 250 for h264, 15 for mpeg2).")
+@click.option("--flicker-hz", type=click.FloatRange(min=0.0), help="Lamp flicker frequency, Hz (mains lamps: 100 or 120).")
+@click.option("--flicker-depth", type=click.FloatRange(min=0.0, max=1.0, max_open=True),
+              help="Lamp flicker depth: light 1 + depth·sin(2π f t) (preset's: 0, steady lamps).")
+@click.option("--shake", "shake_px", type=click.FloatRange(min=0.0),
+              help="Camera shake, RMS px per axis of a smooth translation of the picture (preset's: 0).")
+@click.option("--shake-frames", "shake_smooth_frames", type=click.FloatRange(min=0.0, min_open=True),
+              help="Correlation length of the shake, frames (preset's: 5).")
+@click.option("--t0-phase", "t0_frame_phase", type=click.FloatRange(min=0.0, max=1.0, max_open=True),
+              help="The input's start as a fraction of its frame interval, the same in every test "
+                   "(preset's: drawn per test).")
+@click.option("--no-manifest-exposure", "manifest_exposure", flag_value=False, default=None,
+              help="Leave exposure_s out of campaign.toml (a user who does not know the shutter).")
+@click.option("--motion-blur", flag_value=True, default=None,
+              help="Render the exposure's real motion blur (global shutter only).")
+@click.option("--timestamp-at", type=click.Choice(["middle", "start", "end"]),
+              help="Which instant of the exposure a frame's timestamp marks (preset's: middle).")
+@click.option("--sticker-shape", type=click.Choice(["disc", "square", "strip"]), help="Sticker shape (preset's: disc).")
+@click.option("--sticker-aspect", type=click.FloatRange(min=0.0, min_open=True),
+              help="Sticker length along the chord / width (preset's: 1; a strip's: 4).")
 def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: int | None, fps: float | None,
-             exposure_s: float | None, readout_s: float | None, gop: int | None) -> None:
-    """Render a campaign with a known answer (the digital twin) into OUTDIR."""
+             exposure_s: float | None, readout_s: float | None, gop: int | None, **camera_options) -> None:
+    """Render a campaign with a known answer (the digital twin) into OUTDIR.
+
+    The real-camera options (flicker, shake, blur, ...) are described in docs/twin.md.
+    """
     from .simulate import simulate_campaign
 
     given = {"codec": codec, "bit_rate": bit_rate, "fps": fps, "exposure_s": exposure_s, "readout_s": readout_s,
-             "gop": gop}
+             "gop": gop, **camera_options}
     if fps is not None and exposure_s is None:
         # The preset's exposure is one interval of its own frame rate; keep it one interval of this one.
         given["exposure_s"] = 1.0 / fps
