@@ -270,3 +270,25 @@ def test_simulate_cli_passes_the_options_and_refuses_bad_combinations(tmp_path):
                               "--shake", "0.5"])
     assert res.exit_code != 0 and "rolling shutter" in str(res.exception or res.output)
     assert not (tmp_path / "bad").exists()
+
+
+def test_render_clip_takes_flicker_and_shake_and_occludes_shaped_stickers(tmp_path):
+    from servoscope.simulate.clips import Occluder, render_clip
+
+    scene = Scene.for_size(W, H, sticker_shape="strip", sticker_diameter_px=10.0)
+    lead, _ = scene.sticker_centres_px(0.0)
+    # Hides the strip's left half (its length 40 px along x at pitch 0), still from frame to frame.
+    occ = Occluder("#101010", (lead[1] - 30, lead[1] + 30), 60.0, lead[0] - 60, lead[0] - 60)
+    n = 6
+    shake = np.stack([np.linspace(0, 1.5, n), np.zeros(n)], axis=1)
+    truth = render_clip(tmp_path / "c.avi", scene, np.zeros(n), codec="raw", noise_sigma_dn=0.0, occluder=occ,
+                        lamp_gain=np.linspace(0.8, 1.2, n), shake_xy_px=shake)
+    assert np.allclose(truth["lead_hidden"], 0.5, atol=0.03) and np.all(truth["trail_hidden"] == 0)
+    assert np.array_equal(truth["shake_xy_px"], shake)
+    render_clip(tmp_path / "s.avi", scene, np.zeros(n), codec="raw", noise_sigma_dn=0.0, occluder=occ,
+                shake_xy_px=shake)
+    top = np.array([f.rgb[:20, 200:].astype(float).mean() for f in iter_frames(tmp_path / "c.avi")])
+    steady = np.array([f.rgb[:20, 200:].astype(float).mean() for f in iter_frames(tmp_path / "s.avi")])
+    assert np.allclose(top / steady, np.linspace(0.8, 1.2, n), atol=0.005)
+    with pytest.raises(ServoscopeError):
+        render_clip(tmp_path / "d.avi", scene, np.zeros(n), codec="raw", lamp_gain=np.ones(n + 1))

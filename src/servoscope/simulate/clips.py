@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera.model import CameraModel
+from ..errors import ServoscopeError
 from ..video.writer import VideoWriter
 from .render import FrameRenderer, polygon_coverage
 from .scene import Scene, colour_rgb, marker_angle_rad
@@ -55,7 +56,8 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
                 led_level: np.ndarray | None = None, camera: CameraModel | None = None, codec: str = "h264",
                 bit_rate: int = 20_000_000, noise_sigma_dn: float = 1.5, noise_seed: int = 0,
                 occluder: Occluder | None = None, duplicate_frames: tuple[int, ...] = (),
-                preset: str = "ultrafast", gop: int | None = None) -> dict:
+                preset: str = "ultrafast", gop: int | None = None, lamp_gain: np.ndarray | None = None,
+                shake_xy_px: np.ndarray | None = None) -> dict:
     """Render and encode one clip; return its truth.
 
     Parameters
@@ -84,18 +86,30 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
     preset, gop : str, int or None
         x264 speed preset and GOP length, as
         :class:`~servoscope.video.writer.VideoWriter`.
+    lamp_gain : ndarray, shape (n,), optional
+        The lamps' light per frame (flicker, e.g. from
+        :func:`~servoscope.simulate.scene.lamp_gain`): scales everything but
+        the lit LED; None: steady.
+    shake_xy_px : ndarray, shape (n, 2), optional
+        Translation of the whole picture per frame (camera shake), pixels;
+        the truth's sticker centres stay the blade's.
 
     Returns
     -------
     dict with ``time_s``, ``angle_rad``, ``lead_xy_px``, ``trail_xy_px``
     (ideal pixels), ``lead_hidden``, ``trail_hidden`` (fraction of each
-    sticker's area under the occluder, per frame), all ndarrays.
+    sticker's area under the occluder, per frame), ``shake_xy_px``, all
+    ndarrays.
     """
     pitch = np.asarray(pitch_rad, dtype=np.float64)
     n = pitch.size
     fps = Fraction(fps).limit_denominator(1_000_000)
     time_s = (np.arange(n, dtype=np.float64) * fps.denominator) / fps.numerator
     led = np.ones(n) if led_level is None else np.asarray(led_level, dtype=np.float64)
+    gain = np.ones(n) if lamp_gain is None else np.asarray(lamp_gain, dtype=np.float64)
+    shake = np.zeros((n, 2)) if shake_xy_px is None else np.asarray(shake_xy_px, dtype=np.float64)
+    if gain.shape != (n,) or shake.shape != (n, 2):
+        raise ServoscopeError(f"render_clip: lamp_gain needs shape ({n},) and shake_xy_px ({n}, 2)")
     renderer = FrameRenderer(scene, camera, noise_sigma_dn=noise_sigma_dn, noise_seed=noise_seed)
     lead, trail = scene.sticker_centres_px(pitch)
     hidden = {"lead": np.zeros(n), "trail": np.zeros(n)}
@@ -108,7 +122,7 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
                 writer.write(prev)
                 lead[i], trail[i], pitch[i] = lead[i - 1], trail[i - 1], pitch[i - 1]
                 continue
-            frame = renderer.render(float(pitch[i]), float(led[i]), i)
+            frame = renderer.render(float(pitch[i]), float(led[i]), i, float(gain[i]), tuple(shake[i]))
             if occluder is not None:
                 poly = occluder.outline(i / max(n - 1, 1))
                 cov, x0, y0 = polygon_coverage(poly, (scene.width, scene.height))
@@ -117,7 +131,7 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
                     region += cov[..., None] * (occ_rgb - region)
                     frame[y0:y0 + cov.shape[0], x0:x0 + cov.shape[1]] = np.clip(np.round(region), 0, 255).astype(np.uint8)
                 for name, centre in (("lead", lead[i]), ("trail", trail[i])):
-                    hidden[name][i] = _overlap_fraction(scene, renderer, centre, poly)
+                    hidden[name][i] = _overlap_fraction(scene, renderer, centre, float(pitch[i]), poly)
             writer.write(frame)
             prev = frame
     return {
@@ -127,12 +141,18 @@ def render_clip(path: str | Path, scene: Scene, pitch_rad: np.ndarray, *, fps: f
         "trail_xy_px": trail,
         "lead_hidden": hidden["lead"],
         "trail_hidden": hidden["trail"],
+        "shake_xy_px": shake,
     }
 
 
-def _overlap_fraction(scene: Scene, renderer: FrameRenderer, centre: np.ndarray, rect: np.ndarray) -> float:
-    """Fraction of a sticker disk (ideal pixels) under an axis-aligned rectangle."""
-    outline = scene.disk_outline(centre, scene.sticker_diameter_px)
+def _overlap_fraction(scene: Scene, renderer: FrameRenderer, centre: np.ndarray, pitch_rad: float,
+                      rect: np.ndarray) -> float:
+    """Fraction of a sticker (its shape, turned by the pitch; ideal pixels) under an axis-aligned rectangle."""
+    if scene.sticker_shape == "disc" and scene.sticker_aspect in (None, 1.0):
+        outline = scene.disk_outline(centre, scene.sticker_diameter_px)
+    else:
+        # The sticker's outline about its centre, turned with the blade.
+        outline = scene.to_image(scene.sticker_outline_uv(), pitch_rad) - np.asarray(scene.pivot_xy_px) + centre
     if renderer.camera is not None:
         outline = renderer.camera.distort_points(outline)
     cov, x0, y0 = polygon_coverage(outline)
