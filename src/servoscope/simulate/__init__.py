@@ -4,20 +4,23 @@
   time, optional quantization / rate limit / backlash) and its response.
 * :class:`Scene` — what the camera sees; :class:`FrameRenderer`,
   :func:`render_frame`, :func:`polygon_coverage` — exact-area rendering with
-  lens distortion and sensor noise.
+  lens distortion and sensor noise; :class:`Clutter`, :func:`lamp_gain` —
+  static objects and flickering lamps (real-camera options, docs/twin.md).
 * :func:`simulate_campaign` — videos + campaign.toml + camera.json + truth.json.
 """
 
 from .campaign import simulate_campaign
 from .presets import PRESETS, CampaignPreset, PAPER_SERVO
 from .render import FrameRenderer, polygon_coverage, render_frame
-from .scene import Scene, led_exposure_fraction, marker_angle_rad
+from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
 
 __all__ = [
     "InputSignal",
     "ServoModel",
     "Scene",
+    "Clutter",
+    "lamp_gain",
     "FrameRenderer",
     "render_frame",
     "polygon_coverage",
