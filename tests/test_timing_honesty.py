@@ -189,3 +189,34 @@ def test_track_refuses_an_impossible_shutter(tmp_path, exposure, expected):
     assert len(lines) == 1 and lines[0].startswith("servoscope: error: "), proc.stderr
     assert expected in lines[0] and "a.mp4" in lines[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("given", [True, False])
+def test_switches_at_one_point_of_the_frame_clock_are_a_shared_error(tmp_path, given):
+    """The issue's second case: a 0.1 ms shutter at 200 frames/s and every switch at the same
+    sub-frame phase (one script starts camera and input): every dwell's t0 is off by the same
+    +1 ms, which no averaging over dwells removes. The intervals must say so."""
+    from servoscope.campaign.runner import identify
+    from servoscope.simulate import simulate_campaign
+
+    toml = simulate_campaign(tmp_path, "quick", 1, fps=200, exposure_s=0.0001, width=480, height=384,
+                             t0_frame_phase=0.3, manifest_exposure=given)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    res = identify(toml)
+    s = res.summary()
+    true_t0 = {t["video"]: t["t0_s"] for t in truth["tests"]}
+    errors = [res.tracks[t["label"]].t0_s - true_t0[t["video"]] for t in s["tests"]]
+    assert np.ptp(errors) < 1e-5 and abs(errors[0]) > 0.5e-3  # one shared error, not small
+    gap = 1 / 200 - (0.0001 if given else 0.0)
+    shared = s["dead_time"]["phase"]["shared_t0_stderr_s"]
+    assert shared == pytest.approx(gap / math.sqrt(12), rel=0.05)
+    assert any("same point of the frame clock" in w for w in s["warnings"])
+    tau = truth["model"]["dead_time_s"]
+    for key in ("phase", "step"):
+        lo, hi = s["dead_time"][key]["ci95_s"]
+        assert lo <= tau <= hi, (key, lo, tau, hi)
+    lo, hi = s["model"]["ci95"]["dead_time_s"]
+    assert lo <= tau <= hi
+    for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
+        lo, hi = s["model"]["ci95"][name]
+        assert lo <= truth["model"][name] <= hi, name
