@@ -79,11 +79,25 @@ def test_flicker_in_a_campaign_follows_the_lamps_at_its_frequency(tmp_path):
     spec = np.abs(np.fft.rfft(rel * np.hanning(rel.size)))
     freqs = np.fft.rfftfreq(rel.size, 1 / 100.0)
     assert abs(freqs[np.argmax(spec[1:]) + 1] - f) <= 100.0 / rel.size
-    # Least squares of the level on sin/cos at f: the lamps' amplitude, phase 0.
+    # Least squares of the level on sin/cos at f: the lamps' amplitude and phase (drawn from the seed).
+    phase = truth["video"]["flicker_phase_rad"]
     a = np.stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t), np.ones_like(t)], axis=1)
     coef = np.linalg.lstsq(a, rel, rcond=None)[0]
-    assert coef[0] == pytest.approx(d * np.sinc(f * e), abs=0.01)
-    assert abs(coef[1]) < 0.01
+    amp = d * np.sinc(f * e)
+    assert coef[:2] == pytest.approx([amp * np.cos(phase), amp * np.sin(phase)], abs=0.01)
+
+
+def test_lamps_at_the_frame_rate_look_steady_to_a_global_shutter(tmp_path):
+    # 50 Hz mains, 100 Hz lamps, 100 frames/s: every frame sees the same part of the cycle.
+    simulate_campaign(tmp_path, "quick", seed=1, include_step=False, flicker_hz=100.0, flicker_depth=0.3,
+                      flicker_phase_rad=1.0, exposure_s=0.0025, noise_sigma_dn=0.0, **SMALL)
+    simulate_campaign(tmp_path / "steady", "quick", seed=1, include_step=False, exposure_s=0.0025,
+                      noise_sigma_dn=0.0, **SMALL)
+    name = json.loads((tmp_path / "truth.json").read_text())["tests"][0]["video"]
+    level = np.array([f.rgb[:20].astype(float).mean() for f in iter_frames(tmp_path / name)])
+    steady = np.array([f.rgb[:20].astype(float).mean() for f in iter_frames(tmp_path / "steady" / name)])
+    assert np.ptp(level / steady) < 0.01
+    assert np.mean(level / steady) == pytest.approx(float(lamp_gain(0.0, 0.0025, 100.0, 0.3, 1.0)), abs=0.01)
 
 
 def test_clutter_box_is_where_asked_with_its_colour():
@@ -245,7 +259,8 @@ def test_rolling_shutter_flicker_bands_follow_the_row_times(tmp_path):
     # The left edge is background only near the top and the bottom.
     rows = np.r_[0:60, H - 60:H]
     ratio = frame[rows, :20].astype(float).mean(axis=(1, 2)) / steady[rows, :20].astype(float).mean(axis=(1, 2))
-    want = lamp_gain(truth["time_s"][0] + 0.008 * rows / H, 0.002, f, d)
+    phase = json.loads((tmp_path / "truth.json").read_text())["video"]["flicker_phase_rad"]
+    want = lamp_gain(truth["time_s"][0] + 0.008 * rows / H, 0.002, f, d, phase)
     assert np.abs(ratio - want).max() < 0.02  # 8-bit rounding: 1 DN in ~100
     assert np.ptp(want) > 0.3  # the band is there to see
 

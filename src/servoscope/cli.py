@@ -112,6 +112,8 @@ def cli() -> None:
 @click.option("--flicker-hz", type=click.FloatRange(min=0.0), help="Lamp flicker frequency, Hz (mains lamps: 100 or 120).")
 @click.option("--flicker-depth", type=click.FloatRange(min=0.0, max=1.0, max_open=True),
               help="Lamp flicker depth: light 1 + depth·sin(2π f t) (preset's: 0, steady lamps).")
+@click.option("--flicker-phase", "flicker_phase_rad", type=float,
+              help="The lamps' phase at t = 0, rad (preset's: drawn from the seed).")
 @click.option("--shake", "shake_px", type=click.FloatRange(min=0.0),
               help="Camera shake, RMS px per axis of a smooth translation of the picture (preset's: 0).")
 @click.option("--shake-frames", "shake_smooth_frames", type=click.FloatRange(min=0.0, min_open=True),

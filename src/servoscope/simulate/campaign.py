@@ -177,6 +177,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                    "led_time_s": led_time.tolist()}
         rows = np.arange(preset.height, dtype=np.float64)
     flicker = preset.flicker_depth > 0 and preset.flicker_hz > 0
+    phase = preset.flicker_phase_rad or 0.0
     shake = _shake_px(preset, n, noise_seed)
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
@@ -185,17 +186,18 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
             if preset.readout_s > 0:
                 row_t = _row_time_s(time_s[i], rows, preset)
                 row_led = led_exposure_fraction(row_t, signal.t0_s, preset.exposure_s)
-                row_gain = (lamp_gain(row_t, preset.exposure_s, preset.flicker_hz, preset.flicker_depth)
-                            if flicker else None)
+                row_gain = (lamp_gain(row_t, preset.exposure_s, preset.flicker_hz, preset.flicker_depth,
+                                      phase) if flicker else None)
                 writer.write(renderer.render_rolling(pitch_at(row_t), row_led, i, row_gain))
             elif blur is not None:
                 sub_t, sub_pitch, sub_dt = blur[0][i], blur[1][i], blur[2]
                 sub_led = led_exposure_fraction(sub_t, signal.t0_s, sub_dt)
-                sub_gain = lamp_gain(sub_t, sub_dt, preset.flicker_hz, preset.flicker_depth) if flicker else None
+                sub_gain = (lamp_gain(sub_t, sub_dt, preset.flicker_hz, preset.flicker_depth, phase)
+                            if flicker else None)
                 writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i])))
             else:
-                gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth)) \
-                    if flicker else 1.0
+                gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth,
+                                       phase)) if flicker else 1.0
                 writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
@@ -305,6 +307,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         raise ServoscopeError(f"seed must be a non-negative integer, not {seed!r}")
     seed = int(seed)
     p = replace(base, **overrides)
+    if p.flicker_depth > 0 and p.flicker_phase_rad is None:
+        # Its own stream: the tests' t0 phases and noise seeds keep their values.
+        p = replace(p, flicker_phase_rad=float(np.random.default_rng([seed, 0xF11C]).uniform(0.0, 2.0 * np.pi)))
     suffix = container_suffixes(p.codec)[0]
     fps = Fraction(p.fps).limit_denominator(1_000_000)
     if p.scene is not None:
@@ -377,7 +382,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             # Only a rolling shutter is said: a global shutter's truth stays as it was.
             **({"readout_s": p.readout_s} if p.readout_s > 0 else {}),
             # Real-camera options, only when set (default truth unchanged).
-            **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "shake_px", "shake_smooth_frames",
+            **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },

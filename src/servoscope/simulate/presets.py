@@ -89,6 +89,12 @@ class CampaignPreset:
         lighting: twice the mains frequency), integrated over each exposure
         (each row's, with a rolling shutter); the lit LED shines its own
         light and does not flicker. depth 0 (the default): steady lamps.
+        Lamps at a multiple of the frame rate look steady to a global
+        shutter (each frame sees the same part of the cycle).
+    flicker_phase_rad : float or None
+        The lamps' phase at t = 0; None (the default) draws it from the
+        campaign seed (the mains is not synchronised with the camera);
+        truth.json records it.
     shake_px : float
         Camera shake: RMS of a smooth, seeded translation of the whole
         picture, per axis, recorded pixels (0, the default: a rigid tripod).
@@ -144,6 +150,7 @@ class CampaignPreset:
     scene: Scene | None = field(default=None)
     flicker_hz: float = 0.0
     flicker_depth: float = 0.0
+    flicker_phase_rad: float | None = None
     shake_px: float = 0.0
     shake_smooth_frames: float = 5.0
     t0_frame_phase: float | None = None
@@ -179,6 +186,8 @@ class CampaignPreset:
         """Validate the real-camera options (flicker, shake, blur, timestamps)."""
         if not (math.isfinite(self.flicker_hz) and self.flicker_hz >= 0):
             raise ServoscopeError(f"flicker_hz must be >= 0, not {self.flicker_hz!r}")
+        if self.flicker_phase_rad is not None and not math.isfinite(self.flicker_phase_rad):
+            raise ServoscopeError(f"flicker_phase_rad must be finite, not {self.flicker_phase_rad!r}")
         if not 0.0 <= self.flicker_depth < 1.0:
             raise ServoscopeError(f"flicker_depth must be in [0, 1), not {self.flicker_depth!r}")
         if not (math.isfinite(self.shake_px) and self.shake_px >= 0):

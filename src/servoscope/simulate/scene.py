@@ -85,11 +85,12 @@ def led_exposure_fraction(time_s: np.ndarray | float, switch_off_s: float, expos
     return np.clip((switch_off_s - (t - 0.5 * exposure_s)) / exposure_s, 0.0, 1.0)
 
 
-def lamp_gain(time_s: np.ndarray | float, exposure_s: float, flicker_hz: float, flicker_depth: float) -> np.ndarray:
+def lamp_gain(time_s: np.ndarray | float, exposure_s: float, flicker_hz: float, flicker_depth: float,
+              phase_rad: float = 0.0) -> np.ndarray:
     """Mean gain of flickering lamps over each exposure.
 
-    The lamps' light is ``1 + depth·sin(2π f t)``; a frame exposed over
-    ``[t - e/2, t + e/2]`` collects its mean, ``1 + depth·sin(2π f t)·sinc(f e)``
+    The lamps' light is ``1 + depth·sin(2π f t + φ)``; a frame exposed over
+    ``[t - e/2, t + e/2]`` collects its mean, ``1 + depth·sin(2π f t + φ)·sinc(f e)``
     (``sinc(x) = sin(πx)/(πx)``): a shutter of whole flicker periods sees none.
 
     Parameters
@@ -102,9 +103,11 @@ def lamp_gain(time_s: np.ndarray | float, exposure_s: float, flicker_hz: float, 
         Flicker frequency f, Hz (mains lamps: twice the mains frequency).
     flicker_depth : float
         Modulation depth, in [0, 1).
+    phase_rad : float
+        Phase φ of the lamps at t = 0 (the mains is not synchronised with the camera).
     """
     t = np.asarray(time_s, dtype=float)
-    return 1.0 + flicker_depth * np.sin(2.0 * np.pi * flicker_hz * t) * np.sinc(flicker_hz * exposure_s)
+    return 1.0 + flicker_depth * np.sin(2.0 * np.pi * flicker_hz * t + phase_rad) * np.sinc(flicker_hz * exposure_s)
 
 
 #: Sticker shapes :class:`Scene` draws.
