@@ -560,9 +560,10 @@ def identify(
             f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
         )
     fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
-    if exposure.value_s is not None:
-        # Given, or shown by the LED (a few per mille of gain at most: the box filter's sinc).
-        fr = fr.corrected_for_exposure(exposure.value_s)
+    if campaign.exposure_s is not None:
+        # Only a given exposure: the LED's estimate is too coarse to correct with (its
+        # error would go unstated), and the correction is a few per mille at most.
+        fr = fr.corrected_for_exposure(campaign.exposure_s)
     if fit not in ("auto", "magnitude", "complex"):
         raise ServoscopeError(f"fit: unknown mode {fit!r} (use auto, magnitude or complex)")
     phases_known = bool(np.all(np.isfinite(fr.phase_deg)))
