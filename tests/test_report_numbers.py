@@ -51,3 +51,24 @@ def test_interval_at_the_uncertainty_decimals():
     assert format_interval(0.2290087, 0.2303199, 0.000317651) == "[0.22901, 0.23032]"
     assert format_interval(0.2290087, 0.2303199) == "[0.22901, 0.23032]"
     assert format_interval(float("nan"), 1.0, 0.1) == "—"
+
+
+def test_figure_files_are_the_same_bytes_every_time(tmp_path):
+    """SVGs carry no date and no random ids: the same result writes the same files."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from servoscope.report.html import ReportSection
+
+    files = []
+    for run in ("a", "b"):
+        fig, ax = plt.subplots()
+        ax.plot([0, 1, 2], [1, 3, 2], label="x")
+        ax.legend()
+        section = ReportSection("s", figures_dir=tmp_path / run)
+        section.figure(fig, "caption", "alt", name="fig")
+        files.append((tmp_path / run / "fig.svg").read_bytes())
+    assert b"<dc:date>" not in files[0]
+    assert files[0] == files[1]

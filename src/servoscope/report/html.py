@@ -74,7 +74,11 @@ class ReportSection:
             # The same figures as files, for papers and slides: PNG and SVG.
             self.figures_dir.mkdir(parents=True, exist_ok=True)
             fig.savefig(self.figures_dir / f"{name}.png", dpi=150)
-            fig.savefig(self.figures_dir / f"{name}.svg")
+            # No date and fixed element ids: the same result gives the same bytes.
+            import matplotlib
+
+            with matplotlib.rc_context({"svg.hashsalt": "servoscope"}):
+                fig.savefig(self.figures_dir / f"{name}.svg", metadata={"Date": None})
         return figure_png_base64(fig)
 
     def warnings(self, items: list[str]) -> "ReportSection":
