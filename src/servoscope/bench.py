@@ -41,12 +41,14 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+
 __all__ = ["bench", "run_bench", "render_bench_clips", "check_targets", "gpu_bench", "BENCH_CLIPS", "TARGETS",
            "opencv_pipeline", "decode_only", "whole_commands"]
 
-LEAD = "#d62728"
-TRAIL = "#2ca02c"
-LED = "#ffd400"
+LEAD = LEAD_COLOUR
+TRAIL = TRAIL_COLOUR
+LED = LED_COLOUR
 
 
 def _default_cache() -> Path:

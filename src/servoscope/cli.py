@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from .defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from .errors import ServoscopeError
 
 __all__ = ["main", "cli"]
@@ -149,11 +150,11 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
 
 @cli.command()
 @click.argument("video", type=click.Path(path_type=Path))
-@click.option("--lead", default="#d62728", show_default=True,
+@click.option("--lead", default=LEAD_COLOUR, show_default=True,
               help="Leading-edge marker colour (#rrggbb, CSS name, auto); '#rrggbb@x,y' pins it to the blob at "
                    "pixel (x, y) of the first frame.")
-@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour (@x,y pins it).")
-@click.option("--led", default="#ffd400", show_default=True, help="LED colour; 'none' when there is no LED.")
+@click.option("--trail", default=TRAIL_COLOUR, show_default=True, help="Trailing-edge marker colour (@x,y pins it).")
+@click.option("--led", default=LED_COLOUR, show_default=True, help="LED colour; 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
 @click.option("--exposure", "exposure_s", type=float,
               help="Exposure (shutter) time in seconds, for the LED's sub-frame timing; leave out when not known "

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from ..camera.model import CameraModel
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from ..video.reader import VideoInfo, iter_frames, iter_yuv_frames, probe_video, thread_budget
 from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
@@ -136,9 +137,9 @@ class TrackerSettings:
         and the markers share each frame's exposure).
     """
 
-    lead: str = "#d62728"
-    trail: str = "#2ca02c"
-    led: str | None = "#ffd400"
+    lead: str = LEAD_COLOUR
+    trail: str = TRAIL_COLOUR
+    led: str | None = LED_COLOUR
     camera: CameraModel | None = None
     exposure_s: float | None = None
     search_radius_px: float = 24.0

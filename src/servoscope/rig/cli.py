@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from .protocols import PROTOCOLS
 
 __all__ = ["plan", "drive"]
@@ -37,9 +38,9 @@ __all__ = ["plan", "drive"]
 @click.option("--tail", "tail_s", default=0.5, show_default=True, type=float,
               help="Servo centred after the input before the camera stops, s.")
 @click.option("--rest", "rest_s", default=2.0, show_default=True, type=float, help="Wait between dwells, s.")
-@click.option("--lead", default="#d62728", show_default=True, help="Leading-edge marker colour.")
-@click.option("--trail", default="#2ca02c", show_default=True, help="Trailing-edge marker colour.")
-@click.option("--led", default="#ffd400", show_default=True, help="LED colour.")
+@click.option("--lead", default=LEAD_COLOUR, show_default=True, help="Leading-edge marker colour.")
+@click.option("--trail", default=TRAIL_COLOUR, show_default=True, help="Trailing-edge marker colour.")
+@click.option("--led", default=LED_COLOUR, show_default=True, help="LED colour.")
 @click.option("--units", default="normalized", show_default=True, help="Label of the input's units.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.toml"),
               show_default=True, help="Plan file to write.")

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
 
 __all__ = [
@@ -57,7 +58,7 @@ MIN_UPDATES_PER_PERIOD = 2.5
 #: PWM-frame harmonics k·update_hz (k = 1…PWM_HARMONICS) checked for camera aliases.
 PWM_HARMONICS = 4
 
-_DEFAULT_MARKERS = {"lead": "#d62728", "trail": "#2ca02c", "led": "#ffd400"}
+_DEFAULT_MARKERS = {"lead": LEAD_COLOUR, "trail": TRAIL_COLOUR, "led": LED_COLOUR}
 _TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label"}
 _PLAN_KEYS = {"fps", "update_hz", "settle_s", "periods", "min_seconds", "lead_in_s", "tail_s", "rest_s", "dwells", "drive"}
 _DWELL_KEYS = {"duration_s", "warnings", "max_late_ms"}

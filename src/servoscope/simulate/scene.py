@@ -19,6 +19,7 @@ from dataclasses import dataclass, fields, replace
 import matplotlib.colors
 import numpy as np
 
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
 
 __all__ = [
@@ -262,9 +263,9 @@ class Scene:
     sticker_diameter_px: float = 26.0
     sticker_offset_rad: float = 0.05
     sticker_vertices: int = 256
-    lead_colour: str = "#d62728"
-    trail_colour: str = "#2ca02c"
-    led_colour: str = "#ffd400"
+    lead_colour: str = LEAD_COLOUR
+    trail_colour: str = TRAIL_COLOUR
+    led_colour: str = LED_COLOUR
     led_off_colour: str = "#45441c"
     led_diameter_px: float = 14.0
     led_chord_fraction: float = 0.62

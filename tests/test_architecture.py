@@ -1,0 +1,209 @@
+"""The package's shape, checked: imports flow one way and private names stay home.
+
+Read from the source with :mod:`ast` (nothing is imported), so a cycle made by an
+import inside a function counts as much as one at the top of a module: both make
+a stage depend on a later one.
+
+``KNOWN_CYCLES`` and ``KNOWN_PRIVATE`` list what issue 15 is still taking apart.
+The tests fail on anything new *and* on an entry that no longer happens, so the
+lists only shrink, and must be emptied by whoever fixes an entry.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+# Strongly connected components of the import graph (sorted module names).
+KNOWN_CYCLES: set[tuple[str, ...]] = {
+    ('servoscope.campaign.manifest', 'servoscope.campaign.runner', 'servoscope.report.build'),
+    ('servoscope.markers.error_analysis', 'servoscope.markers.gpu', 'servoscope.markers.tracker'),
+    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit'),
+}
+
+# (importing module, imported module, private name)
+KNOWN_PRIVATE: set[tuple[str, str, str]] = {
+    ('servoscope.cli', 'servoscope.report.build', '_PARAM_LABELS'),
+    ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_chroma_window'),
+    ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_classify_np'),
+    ('servoscope.markers.gpu', 'servoscope.markers.tracker', '_bt601'),
+    ('servoscope.markers.tracker', 'servoscope.markers.kernels', '_chroma_np'),
+    ('servoscope.sysid.frequency_response', 'servoscope.sysid.sine', '_import_pandas'),
+    ('servoscope.sysid.frequency_response', 'servoscope.sysid.sine', '_jsonable'),
+    ('servoscope.sysid.order', 'servoscope.sysid.sine', '_import_pandas'),
+    ('servoscope.sysid.order', 'servoscope.sysid.sine', '_jsonable'),
+    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_identifiability_problem'),
+    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_prepare'),
+    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_sigma'),
+    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_import_pandas'),
+    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_jsonable'),
+    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_readonly'),
+    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_import_pandas'),
+    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_jsonable'),
+    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_readonly'),
+}
+
+
+def _modules() -> dict[str, Path]:
+    root = SRC / "servoscope"
+    mods = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(SRC).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = path
+    return mods
+
+
+def _target(mods: dict[str, Path], current: str, node: ast.ImportFrom) -> str | None:
+    if not node.level:
+        return node.module
+    base = current.split(".")
+    if mods[current].name != "__init__.py":
+        base = base[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _graph() -> tuple[dict[str, set[str]], set[tuple[str, str, str]]]:
+    """Import edges between servoscope's modules, and private names crossing them."""
+    mods = _modules()
+    edges: dict[str, set[str]] = {m: set() for m in mods}
+    private: set[tuple[str, str, str]] = set()
+    for mod, path in mods.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        aliases: dict[str, str] = {}  # local name -> servoscope module it is bound to
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                target = _target(mods, mod, node)
+                if not target or not target.startswith("servoscope"):
+                    continue
+                for alias in node.names:
+                    sub = f"{target}.{alias.name}"
+                    if sub in mods:  # `from package import module`
+                        edges[mod].add(sub)
+                        aliases[alias.asname or alias.name] = sub
+                    elif target in mods:
+                        edges[mod].add(target)
+                        name = alias.name
+                        if name.startswith("_") and not name.startswith("__") and target != mod:
+                            private.add((mod, target, name))
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name in mods:
+                        edges[mod].add(alias.name)
+                        if alias.asname:
+                            aliases[alias.asname] = alias.name
+        # `module._name` on a module bound above (e.g. `tracker._bt601`).
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id in aliases
+                and node.attr.startswith("_")
+                and not node.attr.startswith("__")
+            ):
+                private.add((mod, aliases[node.value.id], node.attr))
+    return edges, private
+
+
+def _cycles(edges: dict[str, set[str]]) -> set[tuple[str, ...]]:
+    """Tarjan's strongly connected components with more than one module."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: set[tuple[str, ...]] = set()
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(edges[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.add(tuple(sorted(component)))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _without_packages(edges: dict[str, set[str]]) -> dict[str, set[str]]:
+    # A package's __init__ re-exports its modules (the public surface); a module importing a
+    # sibling through the package is not a cycle of stages, so edges into __init__ files count
+    # only from outside the package.
+    mods = set(edges)
+    out: dict[str, set[str]] = {}
+    for mod, targets in edges.items():
+        keep = set()
+        for t in targets:
+            if t in mods and _modules()[t].name == "__init__.py" and mod.startswith(t + "."):
+                continue
+            keep.add(t)
+        out[mod] = keep
+    return out
+
+
+@pytest.fixture(scope="module")
+def graph():
+    return _graph()
+
+
+def test_the_checker_sees_a_cycle_and_a_private_name():
+    edges = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _cycles(edges) == {("a", "b", "c")}
+    assert _cycles({"a": {"b"}, "b": set()}) == set()
+
+
+def test_no_new_import_cycle(graph):
+    edges, _ = graph
+    cycles = _cycles(_without_packages(edges))
+    new = cycles - KNOWN_CYCLES
+    gone = KNOWN_CYCLES - cycles
+    assert not new, f"import cycles inside servoscope (an import pointing up the pipeline): {sorted(new)}"
+    assert not gone, f"fixed, remove from KNOWN_CYCLES: {sorted(gone)}"
+
+
+def test_no_new_private_name_across_modules(graph):
+    _, private = graph
+    new = private - KNOWN_PRIVATE
+    gone = KNOWN_PRIVATE - private
+    assert not new, f"private names imported across modules (make them public or move them): {sorted(new)}"
+    assert not gone, f"fixed, remove from KNOWN_PRIVATE: {sorted(gone)}"
+
+
+# Modules may grow to about 500 lines; a few were far larger when this was written.
+MAX_LINES = 650
+KNOWN_LARGE: set[str] = {
+    'servoscope.markers.kernels',
+    'servoscope.markers.tracker',
+    'servoscope.sysid.sine',
+    'servoscope.sysid.tf_fit',
+}
+
+
+def test_no_module_grows_past_the_limit():
+    sizes = {m: len(p.read_text(encoding="utf-8").splitlines()) for m, p in _modules().items()}
+    large = {m for m, n in sizes.items() if n > MAX_LINES}
+    assert not (large - KNOWN_LARGE), f"split these (> {MAX_LINES} lines): {sorted(large - KNOWN_LARGE)}"
+    assert not (KNOWN_LARGE - large), f"small enough now, remove from KNOWN_LARGE: {sorted(KNOWN_LARGE - large)}"
