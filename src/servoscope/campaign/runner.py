@@ -167,14 +167,23 @@ def shared_t0_stderr(tests: list[TestSpec], tracks: dict[str, Track]) -> tuple[f
     estimate) move together and do not average out, and the footage cannot
     tell otherwise. The phase dead time then errs by the dwells' weighted
     mean error c̄ − φ (weights f²/σ², as the phases weigh in the fit), whose
-    root mean square over φ uniform in [L, H] is the shared part; each dwell
-    keeps √(σ² − shared²) as its own (none when it is all shared).
+    root mean square over φ uniform in [L, H] is the shared part, added to
+    the phase dead time's uncertainty.
+
+    Overlapping intervals allow a common phase but do not show one: with a
+    short shutter each gap covers most of the frame, and independent
+    switches overlap by chance. The footage cannot tell the two apart, so
+    each dwell keeps its whole σ in its phase as well (were it split off,
+    independent errors would be read as precise phases and bend ωn and ζ:
+    the quick preset at a quarter-frame shutter, timestamps at the exposure
+    start, gave ωn 34.3 ± 1.3 rad/s for a true 37 with 12 Hz's phase
+    ±0.1° where its t0 alone was off by 11°).
 
     Returns
     -------
     (float, dict of label → float)
         The shared standard uncertainty (s; 0 when the intervals exclude a
-        common phase) and each LED-dated dwell's own.
+        common phase) and each LED-dated dwell's own (its whole σ).
     """
     own: dict[str, float] = {}
     lows, highs, centres, weights, periods = [], [], [], [], []
@@ -200,7 +209,7 @@ def shared_t0_stderr(tests: list[TestSpec], tracks: dict[str, Track]) -> tuple[f
     mean_centre = float(np.average(centres, weights=weights))
     frame = float(np.median(periods))
     shared = frame * math.sqrt((mean_centre - 0.5 * (low + high)) ** 2 + (high - low) ** 2 / 12.0)
-    return shared, {label: math.sqrt(max(sigma**2 - shared**2, 0.0)) for label, sigma in own.items()}
+    return shared, own
 
 
 def step_dead_time_model_stderr(model, run_step: Callable[[object], object]) -> float:
@@ -540,7 +549,7 @@ def identify(
                 track.angle_rad,
                 test.frequency_hz,
                 t0_s=t0,
-                # Each dwell's own part; the part they may share goes to the dead time (below).
+                # Each dwell's whole t0 error; the part they may share is added to the dead time (below).
                 t0_stderr_s=own_t0_stderr.get(test.label, _t0_stderr(test, track)),
                 settle_s=campaign.settle_s,
                 valid=track.valid,
@@ -614,7 +623,8 @@ def identify(
     if shared_t0_s > 0 and model.dead_time_s is not None:
         warnings.append(
             f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
-            f"(±{1e3 * shared_t0_s:.2f} ms) are taken as shared, not averaged, in the phase dead time"
+            f"(±{1e3 * shared_t0_s:.2f} ms) may be one shared error that no averaging removes: the phase dead time's "
+            f"interval includes it"
             + ("" if exposure.known else f"; exposure {exposure.detail}"))
     disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
     if disagreement:

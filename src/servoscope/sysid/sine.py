@@ -838,7 +838,11 @@ def fit_sine(
             # differs from the commanded one: when the rig's and the camera's
             # clocks agree, a free frequency only adds phase noise.
             significant = abs(sol.x[3] - f_cmd) > 3.0 * refined_se
-            if sol.x[3] > 0 and (refine_frequency is True or significant):
+            # Over less than two periods, or with the transient still in the window, a
+            # frequency that differs from the commanded one is the transient's or the
+            # drift's fingerprint, not a clock's: "auto" keeps the command there.
+            trusted = n_periods >= _FEW_PERIODS and "transient" not in flags
+            if sol.x[3] > 0 and (refine_frequency is True or (significant and trusted)):
                 params = sol.x
                 p_names = 4
                 if span > 0 and abs(params[3] - f_cmd) > 2.0 / span:
