@@ -131,3 +131,21 @@ def test_a_clipped_led_widens_t0_to_its_exposure(tmp_path):
     assert abs(bright.t0_s - true_t0) > 1e-3
     assert bright.t0_uncertainty_s == pytest.approx(0.01 / np.sqrt(12.0))
     assert abs(bright.t0_s - true_t0) < 3 * bright.t0_uncertainty_s
+
+
+@pytest.mark.parametrize("phase", np.linspace(0.0, 2 * np.pi, 8, endpoint=False))
+def test_lamp_flicker_on_the_unlit_led_is_not_a_partly_lit_frame(phase):
+    """120 Hz lamps at 20 % depth, 100 frames/s, a quarter-frame shutter: the unlit LED's
+    housing reflects the lamps, so its level swings ±0.2 at the 20 Hz alias while the lit
+    LED's varies less. A switch between two exposures must stay a gap with the truth in it;
+    a level noise capped at 0.03 read a 0.24 frame as partly lit and put t0 5.6 ms late."""
+    fps, e = 100.0, 0.0025
+    t = np.arange(60) / fps
+    t0 = 0.2037  # between frame 20's exposure (ends 0.20125) and frame 21's (starts 0.20875)
+    alias = 0.2 * np.sin(2 * np.pi * 20.0 * t + phase)
+    level = np.where(t < t0, 1.0 + 0.5 * alias, alias)
+    switch, reason = led_switch_time(t, level, e)
+    assert reason is None
+    assert switch.how == "gap"
+    assert switch.earliest_s <= t0 <= switch.latest_s
+    assert abs(switch.t0_s - t0) < 3 * switch.stderr_s
