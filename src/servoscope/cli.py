@@ -148,6 +148,43 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
     click.echo(f"wrote {manifest}")
 
 
+def _frame_source_options(command):
+    """--fps, --start, --timestamps and --bayer: what an image sequence or a raw file is read with."""
+    for option in reversed([
+        click.option("--fps", type=float, help="Frame rate of an image sequence (frames/s); overrides a raw file's header."),
+        click.option("--start", "start_s", type=float, default=0.0, show_default=True,
+                     help="Time of an image sequence's first frame, s."),
+        click.option("--timestamps", type=click.Path(dir_okay=False, path_type=Path),
+                     help="Text file with each frame's time (s), one per line, instead of --fps."),
+        click.option("--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
+                     help="Bayer pattern of raw (undemosaiced) frames."),
+    ]):
+        command = option(command)
+    return command
+
+
+def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path | None, bayer: str | None):
+    """What to read for VIDEO with the frame-source options: (path or source string, name, default CSV path)."""
+    from .video.frame_source import frame_source, is_frame_source, source_name
+
+    given = fps is not None or start_s or timestamps is not None or bayer is not None
+    if not is_frame_source(video):
+        if given:
+            raise ServoscopeError(f"{video}: --fps, --start, --timestamps and --bayer are for image sequences and "
+                                  "raw files; a video's frame times come from its own timestamps")
+        return video, video.name, video.with_name(video.stem + ".track.csv")
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise ServoscopeError(f"{video}: --fps must be > 0 frames/s, got {fps}")
+    source = frame_source(video, fps=fps, start_s=start_s, timestamps=None if timestamps is None else timestamps.resolve(),
+                          bayer=None if bayer is None else bayer.upper())
+    name = source_name(source)
+    import glob
+
+    # Beside the folder of a sequence (the glob's last plain folder), beside a raw file.
+    plain = [part for part in Path(str(video)).parts if not glob.has_magic(part)]
+    return source, name, Path(*plain or ["."]).parent / f"{name}.track.csv"
+
+
 @cli.command()
 @click.argument("video", type=click.Path(path_type=Path))
 @click.option("--lead", default=LEAD_COLOUR, show_default=True,
@@ -168,9 +205,16 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
               help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
 @click.option("--overlay", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the footage with the centroids, joining line and angle drawn (.mp4 or .mov).")
+@_frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
-          readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None) -> None:
-    """Track the two markers through VIDEO and write the per-frame angles."""
+          readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
+          **source) -> None:
+    """Track the two markers through VIDEO and write the per-frame angles.
+
+    VIDEO is a video file, a folder or quoted glob of TIFF/PNG/JPEG frames
+    (with --fps), or a Photron .mraw/.cihx or Phantom .cine file.
+    """
+    video, name, default_csv = _footage(video, **source)
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
     from .markers.selection import parse_marker_spec
@@ -197,9 +241,9 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
 
     note = probe_video(video).conversion_note()
     if note:
-        click.echo(f"{video.name}: {note}")
+        click.echo(f"{name}: {note}")
     if out_csv is None:
-        out_csv = video.with_name(video.stem + ".track.csv")
+        out_csv = default_csv
     out_csv.parent.mkdir(parents=True, exist_ok=True)
     result.to_csv(out_csv)
     s = result.summary()
@@ -213,7 +257,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     if s.get("camera_shake_px"):
         # The measured noise then comes from the markers' separation, which shake leaves alone.
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
-    click.echo(f"{video.name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
+    click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
@@ -223,6 +267,24 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         overlay.parent.mkdir(parents=True, exist_ok=True)
         write_overlay(video, result, overlay, camera=camera)
         click.echo(f"wrote {overlay}")
+
+
+@cli.command()
+@click.argument("footage", type=click.Path(path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
+@_frame_source_options
+def info(footage: Path, as_json: bool, **source) -> None:
+    """Say what servoscope reads from FOOTAGE: format, size, frames, frame rate and where it came from, bit depth."""
+    from .video.info import describe_footage, format_description
+
+    path, _, _ = _footage(footage, **source)
+    described = describe_footage(path)
+    if as_json:
+        import json
+
+        click.echo(json.dumps(described, indent=2))
+    else:
+        click.echo(format_description(described))
 
 
 @cli.command()

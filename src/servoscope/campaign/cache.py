@@ -131,6 +131,7 @@ def _code_identity() -> dict:
     root = Path(__file__).resolve().parents[1]
     files = sorted(root.joinpath("markers").glob("*.py")) + [
         root / "video" / "reader.py",
+        *(root / "video" / f"{name}.py" for name in ("planes", "frame_source", "sources", "sequence", "highspeed")),
         root / "camera" / "model.py",
     ]
     h = hashlib.blake2b(digest_size=16)
@@ -197,7 +198,11 @@ class TrackCache:
 
         Hashes the video's whole content (see :func:`file_digest`).
         """
-        return _key(file_digest(video), settings_fingerprint(settings))
+        from ..video.frame_source import is_frame_source
+        from ..video.sources import frame_source_digest
+
+        digest = frame_source_digest(video, file_digest) if is_frame_source(video) else file_digest(video)
+        return _key(digest, settings_fingerprint(settings))
 
     def paths(self, key: str) -> tuple[Path, Path]:
         """The ``.npz`` and ``.json`` files of an entry."""

@@ -26,7 +26,11 @@ import av
 import numpy as np
 
 from ..errors import ServoscopeError
-from .colour import YuvLayout, layout_of_format, to_i420_bt601, to_rgb
+from .colour import layout_of_format
+from .frame_source import is_frame_source, to_rgb8, to_yuv420
+from .sources import iter_source, open_frame_source
+from .planes import (frame_layout, frame_rgb, i420_of_planes, native_planes, quarter_turns,  # noqa: F401
+                     yuv_planes)
 
 __all__ = ["VideoInfo", "Frame", "YuvFrame", "FIELD_ORDERS", "probe_video", "iter_frames", "iter_yuv_frames",
            "yuv_planes", "is_intra", "configure_decoder", "default_decoder_threads", "i420_of_planes",
@@ -213,7 +217,11 @@ def probe_video(path: str | Path) -> VideoInfo:
     ------
     ServoscopeError
         When the file is missing, empty, not a video, or has no video stream.
+        Image sequences and high-speed raw files (:mod:`servoscope.video.frame_source`)
+        are described from their headers.
     """
+    if is_frame_source(path):
+        return _source_info(path)
     path = Path(path)
     container = _open(path)
     try:
@@ -250,6 +258,23 @@ def probe_video(path: str | Path) -> VideoInfo:
         container.close()
 
 
+def _source_info(path: str | Path) -> VideoInfo:
+    """An image sequence's or a high-speed file's header as a :class:`VideoInfo` (``codec``: its format)."""
+    source = open_frame_source(path)
+    source.close()
+    h = source.header
+    duration = h.frame_count / h.frame_rate_hz if h.frame_rate_hz else float(h.times_s[-1] - h.times_s[0])
+    return VideoInfo(Path(path), h.width, h.height, h.format, h.sample_format, h.frame_rate_hz, h.frame_count,
+                     duration, h.bit_depth, None, None, None)
+
+
+def _check_fields(path: str | Path, fields: str | None) -> None:
+    if fields not in FIELD_ORDERS:
+        raise ServoscopeError(f"fields must be one of None, 'tff', 'bff', not {fields!r}")
+    if fields is not None and is_frame_source(path):
+        raise ServoscopeError(f"{path}: fields apply to interlaced video, not to an image sequence or a raw file")
+
+
 def _first_frame_turns(path: Path, container, stream) -> int:
     """Quarter turns of the first frame (the display matrix reaches PyAV on decoded frames only)."""
     try:
@@ -266,60 +291,6 @@ def _in_file(path: Path, convert, frame):
         return convert(frame)
     except ServoscopeError as exc:
         raise ServoscopeError(f"{path}: {exc}") from None
-
-
-def quarter_turns(frame) -> int:
-    """Counter-clockwise quarter turns (0–3) that show a decoded frame upright (its display matrix).
-
-    Raises
-    ------
-    ServoscopeError
-        For a rotation that is not a multiple of 90° (no camera writes one).
-    """
-    degrees = frame.rotation
-    if not degrees:
-        return 0
-    if degrees % 90:
-        raise ServoscopeError(f"display rotation of {degrees}° is not a multiple of 90°; servoscope cannot show "
-                              "such a frame upright (re-encode it upright)")
-    return (int(degrees) // 90) % 4
-
-
-def frame_layout(frame) -> YuvLayout | None:
-    """A decoded frame's planar Y'CbCr layout from its pixel format and tags (None for other formats)."""
-    return layout_of_format(frame.format.name, frame.color_range, frame.colorspace)
-
-
-def native_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A planar Y'CbCr frame's three planes as views of its buffers (uint8, or uint16 above 8 bits)."""
-    dtype = np.dtype(np.uint8) if frame.format.components[0].bits <= 8 else np.dtype("<u2")
-    out = []
-    for plane in frame.planes[:3]:
-        # Rows are padded to line_size bytes (e.g. 768 for 720 pixels): a strided view, not a copy.
-        buf = np.frombuffer(plane, dtype)
-        stride = plane.line_size // dtype.itemsize
-        out.append(buf[: plane.height * stride].reshape(plane.height, stride)[:, :plane.width])
-    return out[0], out[1], out[2]
-
-
-def _upright(a: np.ndarray, turns: int) -> np.ndarray:
-    return a if not turns else np.ascontiguousarray(np.rot90(a, turns))
-
-
-def frame_rgb(frame) -> np.ndarray:
-    """A decoded frame as upright RGB uint8, by its own tags.
-
-    Untagged 8-bit yuv420p (servoscope's twin) and formats other than
-    planar Y'CbCr go through libswscale as before; every other Y'CbCr
-    layout through :func:`servoscope.video.colour.to_rgb` (the standard
-    equations with the stream's range, matrix and bit depth).
-    """
-    layout = frame_layout(frame)
-    if layout is None or layout.is_writer_default:
-        rgb = frame.to_ndarray(format="rgb24")
-    else:
-        rgb = to_rgb(*native_planes(frame), layout)
-    return _upright(rgb, quarter_turns(frame))
 
 
 #: Accepted values of ``iter_frames(..., fields=)``.
@@ -350,9 +321,11 @@ def iter_frames(path: str | Path, *, threads: int = 0, fields: str | None = None
         When the file cannot be opened, or it breaks before the first frame.
         A video that breaks later ends early; the caller sees fewer frames.
     """
+    _check_fields(path, fields)
+    if is_frame_source(path):
+        yield from (Frame(i, t, rgb) for i, t, rgb in iter_source(path, to_rgb8))
+        return
     path = Path(path)
-    if fields not in FIELD_ORDERS:
-        raise ServoscopeError(f"fields must be one of None, 'tff', 'bff', not {fields!r}")
     container = _open(path)
     try:
         stream = container.streams.video[0]
@@ -450,17 +423,6 @@ class YuvFrame:
 _END = object()
 
 
-def i420_of_planes(y: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Y, U, V planes (possibly strided) as one contiguous (height·3/2, width) I420 array."""
-    h, w = y.shape
-    out = np.empty((h * 3 // 2, w), np.uint8)
-    out[:h] = y
-    chroma = out[h:].reshape(2, h // 2, w // 2)
-    chroma[0] = u
-    chroma[1] = v
-    return out
-
-
 #: Decoder threads when a caller passes 0 (0 here: the budget, then :func:`default_decoder_threads`).
 #: A process that runs one video per core (``bench``'s one-core runs) sets 1 here so that its
 #: decoders do not compete with each other for the same cores.
@@ -518,37 +480,6 @@ def is_intra(frame) -> bool:
     "The codec check").
     """
     return bool(frame.key_frame) or int(frame.pict_type) == 1  # AV_PICTURE_TYPE_I
-
-
-def yuv_planes(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A decoded frame's Y, U, V planes as 8-bit 4:2:0 limited-range BT.601, upright.
-
-    Untagged (or BT.601-tagged, limited-range) 8-bit yuv420p of even size,
-    unrotated, is returned as uint8 views of the frame's buffers (no copy;
-    the views keep the buffers alive). Other planar Y'CbCr layouts are
-    converted by the standard equations from the frame's own range, matrix
-    and bit depth (:func:`servoscope.video.colour.to_i420_bt601`); other
-    pixel formats (RGB, grey) go through libswscale to yuv420p (cropped to
-    even size). A rotated frame is turned upright (a copy).
-    """
-    turns = quarter_turns(frame)
-    layout = frame_layout(frame)
-    if layout is not None and not layout.is_writer_default:
-        y, u, v = _split_i420(to_i420_bt601(*native_planes(frame), layout))
-    else:
-        if frame.format.name != "yuv420p" or frame.width % 2 or frame.height % 2:
-            frame = frame.reformat(width=frame.width - frame.width % 2, height=frame.height - frame.height % 2,
-                                   format="yuv420p")
-        y, u, v = native_planes(frame)
-    if turns:
-        y, u, v = _upright(y, turns), _upright(u, turns), _upright(v, turns)
-    return y, u, v
-
-
-def _split_i420(i420: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    h = i420.shape[0] * 2 // 3
-    chroma = i420[h:].reshape(2, h // 2, i420.shape[1] // 2)
-    return i420[:h], chroma[0], chroma[1]
 
 
 def _decode_into(path: Path, q, stop, threads: int) -> None:
@@ -611,9 +542,12 @@ def iter_yuv_frames(path: str | Path, *, threads: int = 0, fields: str | None = 
     import queue as _queue
     import threading
 
+    _check_fields(path, fields)
+    if is_frame_source(path):
+        # One frame read and converted at a time, in this thread: memory flat.
+        yield from (YuvFrame(i, t, *yuv, yuv[0]) for i, t, yuv in iter_source(path, to_yuv420))
+        return
     path = Path(path)
-    if fields not in FIELD_ORDERS:
-        raise ServoscopeError(f"fields must be one of None, 'tff', 'bff', not {fields!r}")
     q: _queue.Queue = _queue.Queue(maxsize=max(1, int(queue_size)))
     stop = threading.Event()
     worker = threading.Thread(target=_decode_into, args=(path, q, stop, threads), name="servoscope-decode",
