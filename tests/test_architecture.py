@@ -32,19 +32,9 @@ KNOWN_PRIVATE: set[tuple[str, str, str]] = {
     ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_classify_np'),
     ('servoscope.markers.gpu', 'servoscope.markers.tracker', '_bt601'),
     ('servoscope.markers.tracker', 'servoscope.markers.kernels', '_chroma_np'),
-    ('servoscope.sysid.frequency_response', 'servoscope.sysid.sine', '_import_pandas'),
-    ('servoscope.sysid.frequency_response', 'servoscope.sysid.sine', '_jsonable'),
-    ('servoscope.sysid.order', 'servoscope.sysid.sine', '_import_pandas'),
-    ('servoscope.sysid.order', 'servoscope.sysid.sine', '_jsonable'),
     ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_identifiability_problem'),
     ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_prepare'),
     ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_sigma'),
-    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_import_pandas'),
-    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_jsonable'),
-    ('servoscope.sysid.step', 'servoscope.sysid.sine', '_readonly'),
-    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_import_pandas'),
-    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_jsonable'),
-    ('servoscope.sysid.tf_fit', 'servoscope.sysid.sine', '_readonly'),
 }
 
 

@@ -14,7 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from .._io import jsonable, write_json_atomic, write_text_atomic
+from .._io import write_json_atomic, write_text_atomic
+from ..results import jsonable
 from ..camera.exposure import ExposureEstimate, estimate_exposure
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings

@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
-from servoscope.sysid.sine import SineFit, _import_pandas, _jsonable
+from servoscope.results import import_pandas, jsonable
+from servoscope.sysid.sine import SineFit
 
 __all__ = ["FrequencyResponse"]
 
@@ -301,11 +302,11 @@ class FrequencyResponse:
         gain_stderr, gain_db, gain_db_stderr, phase_deg, phase_stderr_deg,
         fidelity, thd, flags (space-separated codes).
         """
-        return [_jsonable(r) for r in self._rows()]
+        return [jsonable(r) for r in self._rows()]
 
     def to_pandas(self) -> Any:
         """The table as a pandas DataFrame (one row per point). Needs pandas."""
-        pd = _import_pandas()
+        pd = import_pandas()
         return pd.DataFrame(self._rows(), columns=list(_COLUMNS))
 
     def to_csv(self, path: str | os.PathLike[str]) -> None:

@@ -41,9 +41,9 @@ from typing import Any, Literal
 import numpy as np
 
 from servoscope.errors import ServoscopeError
+from servoscope.results import import_pandas, jsonable
 from servoscope.sysid._rational import Structure
 from servoscope.sysid.frequency_response import FrequencyResponse
-from servoscope.sysid.sine import _import_pandas, _jsonable
 from servoscope.sysid.tf_fit import (
     J_ACCEPTABLE,
     TransferFunctionFit,
@@ -155,7 +155,7 @@ class OrderSelection:
 
     def summary(self) -> dict[str, Any]:
         """JSON-serializable dict: chosen order, criterion, slope, table, warnings."""
-        return _jsonable(
+        return jsonable(
             {
                 "chosen_order": list(self.best.order),
                 "criterion": self.criterion,
@@ -171,7 +171,7 @@ class OrderSelection:
 
     def to_pandas(self) -> Any:
         """The table as a pandas DataFrame. Needs pandas."""
-        pd = _import_pandas()
+        pd = import_pandas()
         rows = [dict(r, order=f"({r['order'][0]}, {r['order'][1]})") for r in self.table]
         return pd.DataFrame(rows, columns=list(_TABLE_KEYS))
 

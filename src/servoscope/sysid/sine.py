@@ -91,6 +91,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 
 from servoscope.errors import ServoscopeError
+from servoscope.results import html_table, import_pandas, jsonable, readonly
 # The null channel is a property of the two markers' tracks; re-exported here, where fit_sine uses it.
 from servoscope.markers.error_analysis import rigid_motion_null
 
@@ -119,43 +120,6 @@ _HARMONICS = (2, 3, 4, 5)
 _TRANSIENT_SIGMAS = 3.0
 #: Newey–West (HAC) standard errors instead of the white-noise ones.
 _HAC = True
-
-
-def _jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays and NaN to plain, JSON-serializable Python."""
-    if value is None:
-        return None
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return [_jsonable(v) for v in value.tolist()]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
-
-
-def _readonly(a: ArrayLike) -> NDArray[np.float64]:
-    arr = np.array(a, dtype=float)
-    arr.setflags(write=False)
-    return arr
-
-
-def _import_pandas() -> Any:
-    try:
-        import pandas as pd
-    except ImportError as exc:  # pragma: no cover - depends on environment
-        raise ImportError(
-            "to_pandas() needs pandas, which is not a servoscope dependency; "
-            "install it with `pip install pandas`"
-        ) from exc
-    return pd
 
 
 def _wrap_pi(angle_rad: float) -> float:
@@ -323,7 +287,7 @@ class SineFit:
 
     def summary(self) -> dict[str, Any]:
         """Scalar results as a JSON-serializable dict (NaN -> None)."""
-        return _jsonable(
+        return jsonable(
             {
                 "frequency_hz": self.frequency_hz,
                 "frequency_stderr_hz": self.frequency_stderr_hz,
@@ -365,7 +329,7 @@ class SineFit:
 
         Columns: ``time_s``, ``y``, ``fitted``, ``residual``. Requires pandas.
         """
-        pd = _import_pandas()
+        pd = import_pandas()
         return pd.DataFrame(
             {
                 "time_s": np.asarray(self.time_s),
@@ -376,10 +340,7 @@ class SineFit:
         )
 
     def _repr_html_(self) -> str:
-        rows = "".join(
-            f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in self.summary().items()
-        )
-        return f"<table><caption>SineFit</caption>{rows}</table>"
+        return html_table(self.summary(), "SineFit")
 
 
 def _design(t: NDArray[np.float64], freq_hz: float, tc: float) -> NDArray[np.float64]:
@@ -975,10 +936,10 @@ def fit_sine(
         invalid_fraction=float(invalid_fraction),
         flags=tuple(dict.fromkeys(flags)),
         null_harmonic_amplitudes=None if null_amps is None else tuple(null_amps),
-        time_s=_readonly(t),
-        y=_readonly(yw),
-        residual=_readonly(residual),
-        covariance=_readonly(cov),
+        time_s=readonly(t),
+        y=readonly(yw),
+        residual=readonly(residual),
+        covariance=readonly(cov),
         _center_s=tc,
         _cos_coef=a,
         _sin_coef=b,

@@ -53,7 +53,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
 
 from servoscope.errors import ServoscopeError
-from servoscope.sysid.sine import _import_pandas, _jsonable, _readonly
+from servoscope.results import html_table, import_pandas, jsonable, readonly
 
 __all__ = ["StepAnalysis", "analyse_step", "model_step_metrics"]
 
@@ -172,7 +172,7 @@ class StepAnalysis:
         overshoot_pct, settling_time_s, peak_time_s from t0 with the fitted
         dead time, final_change = model DC gain * step) or None.
         """
-        return _jsonable(
+        return jsonable(
             {
                 "rise_time_s": self.rise_time_s,
                 "overshoot_pct": self.overshoot_pct,
@@ -196,17 +196,14 @@ class StepAnalysis:
 
     def to_pandas(self) -> Any:
         """Samples (and model prediction if any) as a DataFrame. Needs pandas."""
-        pd = _import_pandas()
+        pd = import_pandas()
         data: dict[str, Any] = {"time_s": np.asarray(self.time_s), "y": np.asarray(self.y)}
         if self._unit_step is not None:
             data["predicted"] = self.predicted(self.time_s)
         return pd.DataFrame(data)
 
     def _repr_html_(self) -> str:
-        rows = "".join(
-            f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in self.summary().items()
-        )
-        return f"<table><caption>StepAnalysis</caption>{rows}</table>"
+        return html_table(self.summary(), "StepAnalysis")
 
 
 def _moving_average3(r: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -508,8 +505,8 @@ def analyse_step(
         fitted_baseline=b_fit,
         noise_sigma=float(sigma),
         warnings=tuple(warns),
-        time_s=_readonly(t),
-        y=_readonly(yv),
+        time_s=readonly(t),
+        y=readonly(yv),
         _unit_step=unit_step,
         predicted_metrics=predicted_metrics,
     )

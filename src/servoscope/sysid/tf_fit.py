@@ -113,7 +113,7 @@ from servoscope.sysid._rational import (
     log_response_jac,
 )
 from servoscope.sysid.frequency_response import FrequencyResponse
-from servoscope.sysid.sine import _jsonable, _readonly
+from servoscope.results import import_pandas, jsonable, readonly
 
 if TYPE_CHECKING:  # pragma: no cover
     from servoscope.sysid.order import OrderSelection
@@ -765,7 +765,7 @@ class TransferFunctionFit:
             bw = self.bandwidth_rad_s
         except ServoscopeError:
             bw = float("nan")
-        return _jsonable(
+        return jsonable(
             {
                 "mode": self.mode,
                 "order": list(self.order),
@@ -814,9 +814,7 @@ class TransferFunctionFit:
 
     def to_pandas(self) -> Any:
         """Measured vs. fitted gain (and phase) per point as a DataFrame. Needs pandas."""
-        from servoscope.sysid.sine import _import_pandas
-
-        pd = _import_pandas()
+        pd = import_pandas()
         if self.data is None:
             raise ServoscopeError("TransferFunctionFit.to_pandas: no data attached")
         w = self.data.omega_rad_s
@@ -1003,7 +1001,7 @@ def _build(
         damping_ratio=params["damping_ratio"] if second else None,
         dead_time_s=tau,
         **_stderr_fields(st, stderr),
-        covariance=_readonly(cov),
+        covariance=readonly(cov),
         residual_rms_db=float(np.sqrt(np.mean(res_db**2))),
         residual_rms_deg=res_deg,
         n_points=d.n,
@@ -1025,7 +1023,7 @@ def _build(
         n_residuals=m,
         undetermined=tuple(undetermined),
         _structure=st,
-        _theta=_readonly(theta),
+        _theta=readonly(theta),
     )
 
 
@@ -1075,7 +1073,7 @@ def _with_jackknife(fit: TransferFunctionFit, d: _Data) -> TransferFunctionFit:
     return replace(
         fit,
         warnings=tuple(dict.fromkeys(fit.warnings + tuple(warns))),
-        covariance=_readonly(cov),
+        covariance=readonly(cov),
         stderr=stderr,
         ci95=_ci95(names, vals, se_new, fit.n_residuals - fit.n_params),
         stderr_jackknife={n: float(v) for n, v in zip(names, se_jack)},
@@ -1236,7 +1234,7 @@ def _fit_fixed_order(
         samples, ci_b, bw = _bootstrap(fit, d, int(bootstrap), seed)
         fit = replace(
             fit,
-            bootstrap_samples=_readonly(samples),
+            bootstrap_samples=readonly(samples),
             ci95_bootstrap=ci_b,
             warnings=fit.warnings + tuple(bw),
         )

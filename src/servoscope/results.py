@@ -1,0 +1,108 @@
+"""What every result object shares: JSON-ready values, read-only arrays, pandas, an HTML table.
+
+A stage's result (a :class:`~servoscope.sysid.SineFit`, a
+:class:`~servoscope.sysid.TransferFunctionFit`, a campaign's identification result, …) keeps
+its numbers as NumPy values and read-only arrays, and offers ``summary()`` (plain JSON types),
+``to_pandas()`` (pandas is optional) and ``_repr_html_()`` (a table in a notebook). The pieces
+those methods have in common live here, once, so that every result writes NaN, NumPy scalars
+and paths the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["jsonable", "readonly", "import_pandas", "html_table"]
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON types, recursively: the form ``summary()`` returns and result.json holds.
+
+    Parameters
+    ----------
+    value : Any
+        A scalar, array, mapping or sequence (nested freely).
+
+    Returns
+    -------
+    Any
+        Dicts (keys as ``str``), lists, ``bool``, ``int``, ``float``, ``str`` or None:
+        NumPy scalars and arrays converted, tuples as lists, NaN and infinities as None
+        (JSON has neither), paths as strings. Anything else is returned unchanged.
+    """
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [jsonable(v) for v in value.tolist()]
+    # bool before int: bool is an int subclass and must stay a bool.
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def readonly(a: ArrayLike) -> NDArray[np.float64]:
+    """A float64 copy of `a` that cannot be written to.
+
+    Result objects are frozen dataclasses; their arrays are read-only too, so a user who
+    keeps a result cannot change the numbers its ``summary()`` and plots were made from.
+    """
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
+def import_pandas() -> Any:
+    """The pandas module, imported on first use (``to_pandas()`` only).
+
+    Raises
+    ------
+    ImportError
+        pandas is not installed (it is not a servoscope dependency); the message says how
+        to install it.
+    """
+    try:
+        import pandas as pd
+    except ImportError as exc:  # pragma: no cover - depends on environment
+        raise ImportError(
+            "to_pandas() needs pandas, which is not a servoscope dependency; "
+            "install it with `pip install pandas`"
+        ) from exc
+    return pd
+
+
+def html_table(summary: Mapping[str, Any], caption: str) -> str:
+    """A two-column HTML table (key, value) of a summary dict, for ``_repr_html_``.
+
+    Parameters
+    ----------
+    summary : mapping
+        Usually ``result.summary()``; values are written with ``str()``.
+    caption : str
+        The table's caption (the result's class name, say).
+
+    Returns
+    -------
+    str
+        ``<table><caption>…</caption><tr><td>key</td><td>value</td></tr>…</table>``.
+        Keys, values and caption are written as they are (they are the package's own
+        numbers and names, not user markup).
+    """
+    rows = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in summary.items())
+    return f"<table><caption>{caption}</caption>{rows}</table>"
