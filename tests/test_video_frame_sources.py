@@ -281,3 +281,53 @@ def test_info_command(tmp_path):
     assert (said["bit_depth"], said["colour"], said["frame_count"]) == (12, "monochrome", 4)
     proc = run_cli("info", DATA / "cine_781.cine")
     assert proc.returncode == 0 and "9000 frames/s" in proc.stdout and "trigger" in proc.stdout, proc.stdout
+
+
+# --- the manifest's frames = … -------------------------------------------------------------------
+
+MANIFEST = """
+[markers]
+lead = "#d62728"
+trail = "#1f77b4"
+
+[[tests]]
+{source}
+kind = "sine"
+frequency_hz = 1.0
+amplitude = 0.1
+"""
+
+
+def _sequence(folder: Path, n: int = 4) -> None:
+    folder.mkdir()
+    for i in range(n):
+        cv2.imwrite(str(folder / f"f{i:03d}.png"), np.zeros((8, 8, 3), np.uint8))
+
+
+def test_manifest_frames_with_fps(tmp_path):
+    from servoscope.campaign import load_campaign
+
+    _sequence(tmp_path / "dwell_01")
+    (tmp_path / "t.txt").write_text("0\n0.01\n0.02\n0.031\n")
+    cases = {
+        'frames = "dwell_01/*.png"\nfps = 2000': (2000.0, "dwell_01"),
+        'frames = "dwell_01"\ntimestamps = "t.txt"\nlabel = "d1"': (None, "d1"),
+    }
+    for source, (fps, label) in cases.items():
+        manifest = tmp_path / "campaign.toml"
+        manifest.write_text(MANIFEST.format(source=source))
+        test = load_campaign(manifest).tests[0]
+        assert test.label == label
+        assert probe_video(test.video).frame_rate_hz == fps
+    bad = {
+        'frames = "dwell_01/*.png"': "give it with --fps (or fps = … in the manifest)",
+        'frames = "dwell_01/*.png"\nfps = -5': "fps must be > 0",
+        'frames = "dwell_01/*.png"\nvideo = "a.mp4"\nfps = 5': "not both",
+        'video = "a.mp4"\nfps = 5': "for frames = …, not a video",
+        'frames = "dwell_01"\nfps = 5\nbayer = "XYZW"': "bayer must be one of",
+    }
+    for source, expected in bad.items():
+        manifest = tmp_path / "campaign.toml"
+        manifest.write_text(MANIFEST.format(source=source))
+        with pytest.raises(ServoscopeError, match=expected.replace("(", r"\(").replace(")", r"\)")):
+            load_campaign(manifest)

@@ -131,6 +131,9 @@ def cli() -> None:
 @click.option("--sticker-shape", type=click.Choice(["disc", "square", "strip"]), help="Sticker shape (preset's: disc).")
 @click.option("--sticker-aspect", type=click.FloatRange(min=0.0, min_open=True),
               help="Sticker length along the chord / width (preset's: 1; a strip's: 4).")
+@click.option("--frames", "frames_format", type=click.Choice(["tiff16"]),
+              help="Write each test as a folder of frames instead of a video (tiff16: 16-bit RGB TIFFs, as "
+                   "high-speed cameras save); campaign.toml then gives frames and fps.")
 def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: int | None, fps: float | None,
              exposure_s: float | None, readout_s: float | None, gop: int | None, **camera_options) -> None:
     """Render a campaign with a known answer (the digital twin) into OUTDIR.

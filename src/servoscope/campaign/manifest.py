@@ -20,6 +20,7 @@ from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
 from ..markers.selection import check_near
+from ..video.frame_source import MANIFEST_KEYS, manifest_frame_source, source_name
 
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
@@ -315,10 +316,21 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         if not isinstance(entry, dict):
             problems.add(where, "must be a table")
             continue
-        problems.unknown(where, entry.keys(), _TEST_KEYS)
+        problems.unknown(where, entry.keys(), _TEST_KEYS | set(MANIFEST_KEYS))
         ok = True
         video = entry.get("video")
-        if not isinstance(video, str) or not video:
+        if "frames" in entry:  # an image sequence or a high-speed raw file (issue 16)
+            try:
+                video = manifest_frame_source(entry, base)
+                default_label = source_name(video)
+            except ServoscopeError as exc:
+                problems.add(f"{where}.frames", str(exc))
+                video, default_label = None, f"test{i}"
+        elif any(key in entry for key in MANIFEST_KEYS):
+            problems.add(where, f"{', '.join(k for k in MANIFEST_KEYS if k in entry)}: for frames = …, not a video")
+        if video is None and "frames" in entry:
+            ok = False
+        elif not isinstance(video, str) or not video:
             problems.add(f"{where}.video", "missing: give the recording's file name")
             ok = False
         kind = entry.get("kind")
@@ -349,7 +361,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         t0 = None
         if "t0_s" in entry:
             t0 = problems.number(f"{where}.t0_s", entry["t0_s"])
-        default_label = Path(video).stem if isinstance(video, str) and video else f"test{i}"
+        if "frames" not in entry:
+            default_label = Path(video).stem if isinstance(video, str) and video else f"test{i}"
         label = entry.get("label", default_label)
         if not isinstance(label, str) or not label or "/" in label or "\\" in label:
             problems.add(f"{where}.label", "must be non-empty text without slashes")

@@ -19,6 +19,7 @@ import control
 import numpy as np
 
 from ..errors import ServoscopeError
+from ..video.sequence_writer import TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
@@ -180,8 +181,12 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     phase = preset.flicker_phase_rad or 0.0
     shake = _shake_px(preset, n, noise_seed)
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
-    with VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
-                     preset=preset.x264_preset, gop=preset.gop) as writer:
+    if preset.frames_format is not None:
+        writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
+    else:
+        writer_cm = VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
+                                preset=preset.x264_preset, gop=preset.gop)
+    with writer_cm as writer:
         for i in range(n):
             if preset.readout_s > 0:
                 row_t = _row_time_s(time_s[i], rows, preset)
@@ -310,7 +315,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     if p.flicker_depth > 0 and p.flicker_phase_rad is None:
         # Its own stream: the tests' t0 phases and noise seeds keep their values.
         p = replace(p, flicker_phase_rad=float(np.random.default_rng([seed, 0xF11C]).uniform(0.0, 2.0 * np.pi)))
-    suffix = container_suffixes(p.codec)[0]
+    suffix = "" if p.frames_format is not None else container_suffixes(p.codec)[0]  # a folder of frames
     fps = Fraction(p.fps).limit_denominator(1_000_000)
     if p.scene is not None:
         scene = replace(p.scene, **scene_kw) if scene_kw else p.scene
@@ -355,7 +360,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     camera.save(out / "camera.json")
     (out / "truth.json").write_text(json.dumps(_truth(p, seed, camera, fps, scene, tests), allow_nan=False) + "\n")
     toml_path = out / "campaign.toml"
-    toml_path.write_text(_campaign_toml(p, scene, tests))
+    toml_path.write_text(_campaign_toml(p, scene, tests, fps if p.frames_format is not None else None))
     return toml_path
 
 
@@ -383,7 +388,8 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             **({"readout_s": p.readout_s} if p.readout_s > 0 else {}),
             # Real-camera options, only when set (default truth unchanged).
             **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
-                                          "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure")
+                                          "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
+                                          "frames_format")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
@@ -392,7 +398,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
     }
 
 
-def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
+def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fps: Fraction | None = None) -> str:
     lines = [
         "# Simulated campaign written by servoscope.simulate (the true answer is in truth.json).",
         "[camera]",
@@ -414,7 +420,9 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict]) -> str:
         f"units = {_toml_str(p.input_units)}",
     ]
     for t in tests:
-        lines += ["", "[[tests]]", f"video = {_toml_str(t['video'])}", f"kind = {_toml_str(t['kind'])}"]
+        source = ([f"frames = {_toml_str(t['video'] + '/*.tif')}", f"fps = {_toml_float(float(frames_fps))}"]
+                  if frames_fps is not None else [f"video = {_toml_str(t['video'])}"])
+        lines += ["", "[[tests]]", *source, f"kind = {_toml_str(t['kind'])}"]
         if t["kind"] == "sine":
             lines.append(f"frequency_hz = {_toml_float(t['frequency_hz'])}")
         lines.append(f"amplitude = {_toml_float(t['amplitude'])}")

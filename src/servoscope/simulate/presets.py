@@ -120,6 +120,11 @@ class CampaignPreset:
     timestamp_at : {"middle", "start", "end"}
         Which instant of the exposure the written frame timestamp marks
         (campaign.toml ``[camera] timestamp`` says it when not "middle").
+    frames_format : {None, "tiff16"}
+        Write each test as a folder of frames instead of a video (the
+        manifest then says ``frames`` and ``fps``): ``"tiff16"``, 16-bit RGB
+        TIFFs of the rendered 8-bit frames (``v · 257``), as high-speed
+        cameras save; the codec is then unused.
     """
 
     name: str
@@ -159,6 +164,7 @@ class CampaignPreset:
     blur_step_px: float = 0.5
     blur_max_samples: int = 32
     timestamp_at: str = "middle"
+    frames_format: str | None = None
 
     def __post_init__(self) -> None:
         self._check_camera_options()
@@ -201,6 +207,8 @@ class CampaignPreset:
             raise ServoscopeError("blur_step_px must be > 0 and blur_max_samples an integer >= 1")
         if self.timestamp_at not in TIMESTAMP_AT:
             raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
+        if self.frames_format not in (None, "tiff16"):
+            raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
         if self.readout_s > 0:
             # The row-by-row renderer draws one pose per row; blur would need
             # sub-exposures per row, shake a per-row shift of the background.

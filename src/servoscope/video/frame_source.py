@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import ServoscopeError
 
 __all__ = ["SOURCE_SEPARATOR", "RAW_SUFFIXES", "IMAGE_SUFFIXES", "BAYER_PATTERNS", "SourceSpec", "SourceHeader",
-           "FrameSource", "frame_source", "parse_frame_source", "is_frame_source",
+           "FrameSource", "frame_source", "parse_frame_source", "is_frame_source", "MANIFEST_KEYS", "manifest_frame_source",
            "to_rgb8", "to_yuv420", "demosaic", "regularity", "regular_times", "source_name"]
 
 #: Between a source's path and its options.
@@ -363,3 +363,52 @@ def to_yuv420(samples: np.ndarray, bit_depth: int, bayer: str | None = None) -> 
     i420 = rgb_to_yuv420p(to_rgb8(samples, bit_depth, bayer)[:h, :w])
     chroma = i420[h:].reshape(2, h // 2, w // 2)
     return i420[:h], chroma[0], chroma[1]
+
+
+#: A manifest's ``[[tests]]`` keys for a frame source (``frames`` instead of ``video``).
+MANIFEST_KEYS = ("frames", "fps", "start_s", "timestamps", "bayer", "bits")
+
+
+def manifest_frame_source(entry: dict, base: Path) -> str:
+    """A manifest test's frame source: ``frames = "dwell_01/*.tif"`` with ``fps = 2000`` (…), as a path string.
+
+    Parameters
+    ----------
+    entry : dict
+        The ``[[tests]]`` table, with ``frames`` (a folder, a glob or a raw
+        file, relative to the manifest's folder) and optionally ``fps``,
+        ``start_s``, ``timestamps`` (a file, relative to the manifest's
+        folder), ``bayer`` and ``bits``.
+    base : Path
+        The manifest's folder.
+
+    Raises
+    ------
+    ServoscopeError
+        When ``video`` is given too, or an option is of the wrong type.
+    """
+    if "video" in entry:
+        raise ServoscopeError("give either video (a video file) or frames (an image sequence or a raw file), not both")
+    frames = entry["frames"]
+    if not isinstance(frames, str) or not frames:
+        raise ServoscopeError("frames must be a folder, a glob or a raw file's name")
+    numbers = {}
+    for key in ("fps", "start_s", "bits"):
+        if key in entry:
+            value = entry[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+                raise ServoscopeError(f"{key} must be a number, not {value!r}")
+            numbers[key] = value
+    if numbers.get("fps", 1) <= 0:
+        raise ServoscopeError(f"fps must be > 0 frames/s, not {numbers['fps']!r}")
+    timestamps = entry.get("timestamps")
+    bayer = entry.get("bayer")
+    for key, value in (("timestamps", timestamps), ("bayer", bayer)):
+        if value is not None and not isinstance(value, str):
+            raise ServoscopeError(f"{key} must be text, not {value!r}")
+    if bayer is not None and bayer.upper() not in BAYER_PATTERNS:
+        raise ServoscopeError(f"bayer must be one of {sorted(BAYER_PATTERNS)}, not {bayer!r}")
+    bits = numbers.get("bits")
+    return frame_source(base / frames, fps=numbers.get("fps"), start_s=float(numbers.get("start_s", 0.0)),
+                        timestamps=None if timestamps is None else (base / timestamps).resolve(),
+                        bayer=None if bayer is None else bayer.upper(), bits=None if bits is None else int(bits))

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ServoscopeError
-from .frame_source import is_frame_source, regularity
+from .frame_source import is_frame_source, parse_frame_source, regularity
 from .sources import open_frame_source
 
 __all__ = ["describe_footage", "format_description"]
@@ -52,7 +52,7 @@ def describe_footage(path: str | Path) -> dict:
         source.close()
         h = source.header
         return {
-            "path": str(path), "format": h.format, "width": h.width, "height": h.height,
+            "path": parse_frame_source(path).path, "format": h.format, "width": h.width, "height": h.height,
             "frame_count": h.frame_count, "frame_rate_hz": h.frame_rate_hz, "frame_rate_from": h.frame_rate_from,
             "bit_depth": h.bit_depth, "colour": h.colour, "sample_format": h.sample_format,
             "timestamps": f"{regularity(h.times_s)}, from the {h.times_from}",
