@@ -22,7 +22,6 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 KNOWN_CYCLES: set[tuple[str, ...]] = {
     ('servoscope.campaign.manifest', 'servoscope.campaign.runner', 'servoscope.report.build'),
     ('servoscope.markers.error_analysis', 'servoscope.markers.gpu', 'servoscope.markers.tracker'),
-    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit'),
 }
 
 # (importing module, imported module, private name)
@@ -32,9 +31,6 @@ KNOWN_PRIVATE: set[tuple[str, str, str]] = {
     ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_classify_np'),
     ('servoscope.markers.gpu', 'servoscope.markers.tracker', '_bt601'),
     ('servoscope.markers.tracker', 'servoscope.markers.kernels', '_chroma_np'),
-    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_identifiability_problem'),
-    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_prepare'),
-    ('servoscope.sysid.order', 'servoscope.sysid.tf_fit', '_sigma'),
 }
 
 
@@ -188,7 +184,6 @@ KNOWN_LARGE: set[str] = {
     'servoscope.markers.kernels',
     'servoscope.markers.tracker',
     'servoscope.sysid.sine',
-    'servoscope.sysid.tf_fit',
 }
 
 

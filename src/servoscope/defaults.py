@@ -14,3 +14,24 @@ LEAD_COLOUR = "#d62728"
 TRAIL_COLOUR = "#2ca02c"
 #: The input-start LED, lit.
 LED_COLOUR = "#ffd400"
+
+# -- sysid: when a dwell or a fit earns a warning ------------------------------------------------
+#: Sinusoidal fidelity (share of the output's AC power in the fitted sine) below this flags a
+#: dwell "low_fidelity" (fit_sine) and earns the transfer-function fit a warning.
+LOW_FIDELITY = 0.95
+#: THD above this, with harmonics significant at p < 1e-3 (fit_sine's test), flags a dwell
+#: "distorted". A servo's own low-pass attenuates the harmonics its nonlinearity makes (a
+#: rate-limited triangle has 12 % THD, ~2 % after the paper's servo at 5 Hz), so the threshold
+#: is low; the significance test keeps noise from tripping it.
+DISTORTED_THD = 0.01
+#: THD above this earns the transfer-function fit a distortion warning when no dwell was
+#: flagged by fit_sine's test (a hand-made FrequencyResponse): with no test, a plain threshold
+#: well above the noise floor of the THD estimate.
+DISTORTED_THD_UNTESTED = 0.05
+#: Share of invalid frames in a sine dwell's window above which the dwell is flagged.
+MAX_INVALID_FRACTION = 0.2
+#: Sine frequencies at or above this fraction of the Nyquist frequency are flagged.
+NEAR_NYQUIST = 0.8
+#: A fit parameter whose delete-one jackknife error exceeds its Jacobian error this many times
+#: earns a warning (it rests on one dwell).
+JACKKNIFE_WIDENING_WARNING = 2.0

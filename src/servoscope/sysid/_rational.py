@@ -317,3 +317,8 @@ def _factored_poly(theta: NDArray[np.float64], real_at: int, n_real: int, quad_a
         wn, ze = math.exp(theta[quad_at + 2 * i]), math.exp(theta[quad_at + 2 * i + 1])
         poly = np.polymul(poly, [1.0 / wn**2, 2.0 * ze / wn, 1.0])
     return poly
+
+
+def param_words(name: str) -> str:
+    """A parameter's name as words for a message ("natural_frequency_rad_s" -> "natural frequency")."""
+    return name.replace("_rad_s", "").replace("_s", "").replace("_", " ")

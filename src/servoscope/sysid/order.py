@@ -35,33 +35,23 @@ The table's AIC/BIC, and those of the fits in `fits`, are these values.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from dataclasses import replace
+from typing import Literal
 
 import numpy as np
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import import_pandas, jsonable
 from servoscope.sysid._rational import Structure
 from servoscope.sysid.frequency_response import FrequencyResponse
-from servoscope.sysid.tf_fit import (
-    J_ACCEPTABLE,
-    TransferFunctionFit,
-    _identifiability_problem,
-    _prepare,
-    _sigma,
-    fit_transfer_function,
-)
+from servoscope.sysid._fixed_order import fit_fixed_order
+from servoscope.sysid._tf_data import floored_sigma, identifiability_problem, prepare_fit_data
+from servoscope.sysid._tf_metrics import J_ACCEPTABLE
+from servoscope.sysid.tf_result import OrderSelection, TransferFunctionFit
 
 __all__ = ["OrderSelection", "estimate_slope_db_per_decade", "select_order"]
 
 #: Criterion differences below this are "not worth more than a bare mention".
 CRITERION_TIE = 2.0
-
-_TABLE_KEYS = (
-    "order", "n_params", "J", "AIC", "BIC", "residual_rms_db", "residual_rms_deg", "relative_degree", "determined",
-    "chosen",
-)
 
 
 def estimate_slope_db_per_decade(fr: FrequencyResponse) -> tuple[float, float]:
@@ -87,7 +77,7 @@ def estimate_slope_db_per_decade(fr: FrequencyResponse) -> tuple[float, float]:
     o = np.argsort(w, kind="stable")
     w = w[o]
     db = fr.gain_db[ok][o]
-    sig = _sigma(fr.gain_db_stderr[ok][o] * (math.log(10.0) / 20.0)) * (20.0 / math.log(10.0))
+    sig = floored_sigma(fr.gain_db_stderr[ok][o] * (math.log(10.0) / 20.0)) * (20.0 / math.log(10.0))
     top = w >= w[-1] / math.sqrt(10.0)
     if np.count_nonzero(top) < 3:
         top = np.zeros(w.size, bool)
@@ -105,94 +95,6 @@ def estimate_slope_db_per_decade(fr: FrequencyResponse) -> tuple[float, float]:
         r = A @ coef - b
         cov = cov * max(float(r @ r) / dof, 1.0)
     return float(coef[1]), float(math.sqrt(cov[1, 1]))
-
-
-@dataclass(frozen=True)
-class OrderSelection:
-    """Result of :func:`select_order`.
-
-    Attributes
-    ----------
-    table : tuple of dict
-        One row per candidate, ascending ``n_params``: ``order`` ([nb, na]),
-        ``n_params``, ``J``, ``AIC``, ``BIC``, ``residual_rms_db``,
-        ``residual_rms_deg``, ``relative_degree`` (na - nb), ``determined``
-        (every pole/zero parameter determined by the data), ``chosen``.
-    best : TransferFunctionFit
-        The chosen model.
-    fits : dict of (nb, na) to TransferFunctionFit
-        Every candidate's fit.
-    criterion : str
-        "BIC" or "AIC".
-    mode : str
-        "magnitude" or "complex".
-    slope_db_per_decade, slope_stderr_db_per_decade : float
-        Measured high-frequency slope (see :func:`estimate_slope_db_per_decade`).
-    relative_degree_estimate : int or None
-        ``max(1, round(-slope/20))`` (None when the slope is unknown).
-    noise_scale : float
-        ``phi`` (see the module docstring); 1 when the measured standard
-        errors explain the scatter of the best candidate.
-    warnings : tuple of str
-        Candidates that could not be fitted, disagreements.
-    """
-
-    table: tuple[dict[str, Any], ...]
-    best: TransferFunctionFit
-    fits: dict[tuple[int, int], TransferFunctionFit] = field(repr=False)
-    criterion: str
-    mode: str
-    slope_db_per_decade: float
-    slope_stderr_db_per_decade: float
-    relative_degree_estimate: int | None
-    noise_scale: float = 1.0
-    warnings: tuple[str, ...] = ()
-
-    @property
-    def order(self) -> tuple[int, int]:
-        """The chosen ``(nb, na)``."""
-        return self.best.order
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-serializable dict: chosen order, criterion, slope, table, warnings."""
-        return jsonable(
-            {
-                "chosen_order": list(self.best.order),
-                "criterion": self.criterion,
-                "mode": self.mode,
-                "slope_db_per_decade": self.slope_db_per_decade,
-                "slope_stderr_db_per_decade": self.slope_stderr_db_per_decade,
-                "relative_degree_estimate": self.relative_degree_estimate,
-                "noise_scale": self.noise_scale,
-                "table": [dict(r) for r in self.table],
-                "warnings": list(self.warnings),
-            }
-        )
-
-    def to_pandas(self) -> Any:
-        """The table as a pandas DataFrame. Needs pandas."""
-        pd = import_pandas()
-        rows = [dict(r, order=f"({r['order'][0]}, {r['order'][1]})") for r in self.table]
-        return pd.DataFrame(rows, columns=list(_TABLE_KEYS))
-
-    def _repr_html_(self) -> str:
-        head = "".join(f"<th>{k}</th>" for k in _TABLE_KEYS)
-
-        def cell(v: Any) -> str:
-            if isinstance(v, float):
-                return f"{v:.4g}"
-            if isinstance(v, list):
-                return f"({v[0]}, {v[1]})"
-            return "✔" if v is True else ("" if v is False or v is None else str(v))
-
-        body = "".join(
-            "<tr>" + "".join(f"<td>{cell(r[k])}</td>" for k in _TABLE_KEYS) + "</tr>" for r in self.table
-        )
-        cap = (
-            f"Order selection ({self.mode}, {self.criterion}); high-frequency slope "
-            f"{self.slope_db_per_decade:.1f} ± {self.slope_stderr_db_per_decade:.1f} dB/decade"
-        )
-        return f"<table><caption>{cap}</caption><tr>{head}</tr>{body}</table>"
 
 
 def select_order(
@@ -239,7 +141,7 @@ def select_order(
         raise ServoscopeError(f"select_order: unknown mode {mode!r} (use 'magnitude' or 'complex')")
     if candidates is None:
         candidates = [(nb, na) for na in range(1, int(max_order) + 1) for nb in range(na)]
-    d, _ = _prepare(fr, mode, "select_order")
+    d, _ = prepare_fit_data(fr, mode, "select_order")
     m = d.n + int(np.count_nonzero(d.has_ph))
     warns: list[str] = []
     fits: dict[tuple[int, int], TransferFunctionFit] = {}
@@ -250,14 +152,14 @@ def select_order(
             warns.append(f"order ({nb}, {na}) not tried: ({nb - 1}, {na}) or fewer zeros were already over-parameterized")
             continue
         st = Structure(int(nb), int(na), zeros, mode == "complex", 1.0)
-        problem = _identifiability_problem(d, st, mode)
+        problem = identifiability_problem(d, st, mode)
         if problem is None and st.n_params >= m:
             problem = f"order ({nb}, {na}) has {st.n_params} parameters for {m} residuals: no degree of freedom left"
         if problem is not None:
             first_problem = first_problem or problem
             warns.append(f"order ({nb}, {na}) not tried: {problem}")
             continue
-        fit = fit_transfer_function(fr, order=(nb, na), mode=mode, zeros=zeros, jackknife=False)
+        fit = fit_fixed_order(fr, (nb, na), mode=mode, zeros=zeros, jackknife=False)
         fits[(nb, na)] = fit
         if fit.undetermined:
             hopeless.add(na)

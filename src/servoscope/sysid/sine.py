@@ -90,6 +90,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 
+from servoscope.defaults import DISTORTED_THD, LOW_FIDELITY, MAX_INVALID_FRACTION, NEAR_NYQUIST
 from servoscope.errors import ServoscopeError
 from servoscope.results import html_table, import_pandas, jsonable, readonly
 # The null channel is a property of the two markers' tracks; re-exported here, where fit_sine uses it.
@@ -104,18 +105,6 @@ _MIN_INTRA = 8
 _INTRA_SE_RATIO = 4.0
 _FEW_SAMPLES = 20
 _FEW_PERIODS = 2.0
-#: Fidelity below this flags a dwell as "low_fidelity".
-LOW_FIDELITY = 0.95
-#: THD above this (with significant harmonics) flags a dwell as "distorted".
-#: A servo's own low-pass attenuates the harmonics its nonlinearity makes
-#: (a rate-limited triangle has 12 % THD, ~2 % after the paper's servo at
-#: 5 Hz), so the threshold is low; the significance test keeps noise from
-#: tripping it.
-HIGH_THD = 0.01
-#: Share of invalid frames in the window above which a dwell is flagged.
-MAX_INVALID_FRACTION = 0.2
-#: Frequencies at or above this fraction of the Nyquist frequency are flagged.
-NEAR_NYQUIST = 0.8
 _HARMONICS = (2, 3, 4, 5)
 _TRANSIENT_SIGMAS = 3.0
 #: Newey–West (HAC) standard errors instead of the white-noise ones.
@@ -904,9 +893,9 @@ def fit_sine(
             "(nonlinearity or noise)"
         )
         flags.append("low_fidelity")
-    if math.isfinite(thd) and thd > HIGH_THD and h_p < 1e-3:
+    if math.isfinite(thd) and thd > DISTORTED_THD and h_p < 1e-3:
         warnings.append(
-            f"harmonic distortion {100 * thd:.1f} % (> {100 * HIGH_THD:g} %): nonlinear response "
+            f"harmonic distortion {100 * thd:.1f} % (> {100 * DISTORTED_THD:g} %): nonlinear response "
             "(rate limit, backlash, saturation?)"
         )
         flags.append("distorted")

@@ -1,0 +1,113 @@
+"""Fit a transfer function of one given order: the core below both the fit and the order selection.
+
+:func:`fit_fixed_order` prepares the data (:mod:`._tf_data`), runs the multistart minimizer
+(:mod:`._tf_minimize`), builds the result (:mod:`._tf_build`) and checks its errors by
+resampling (:mod:`._tf_resample`). :func:`~servoscope.sysid.fit_transfer_function` calls it
+for a given order, :func:`~servoscope.sysid.select_order` for each candidate, and
+``order="auto"`` goes through the selection: every import points down.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from servoscope.errors import ServoscopeError
+from servoscope.results import readonly
+from servoscope.sysid._rational import Structure
+from servoscope.sysid._tf_build import build_fit
+from servoscope.sysid._tf_data import identifiability_problem, prepare_fit_data
+from servoscope.sysid._tf_minimize import N_STARTS, multistart
+from servoscope.sysid._tf_resample import bootstrap_dwells, with_jackknife
+from servoscope.sysid.frequency_response import FrequencyResponse
+from servoscope.sysid.tf_result import TransferFunctionFit
+
+__all__ = ["check_fit_options", "check_order", "fit_fixed_order"]
+
+
+def check_fit_options(who: str, mode: str, zeros: str, bootstrap: int) -> None:
+    """Raise :class:`~servoscope.errors.ServoscopeError` for an unknown mode or zeros, or a bad bootstrap count."""
+    if mode not in ("magnitude", "complex"):
+        raise ServoscopeError(f"{who}: unknown mode {mode!r} (use 'magnitude' or 'complex')")
+    if zeros not in ("minimum_phase", "free"):
+        raise ServoscopeError(f"{who}: unknown zeros {zeros!r} (use 'minimum_phase' or 'free')")
+    if zeros == "free" and mode != "complex":
+        raise ServoscopeError(
+            f"{who}: zeros='free' needs mode='complex' (a magnitude fit cannot tell a zero's sign)"
+        )
+    if int(bootstrap) < 0:
+        raise ServoscopeError(f"{who}: bootstrap must be >= 0, got {bootstrap!r}")
+
+
+def check_order(order: Any) -> tuple[int, int]:
+    """``(nb, na)`` as ints, checked (``0 <= nb < na <= 4``)."""
+    try:
+        nb, na = (int(v) for v in order)
+    except (TypeError, ValueError):
+        raise ServoscopeError(f"order must be (nb, na) or 'auto', got {order!r}") from None
+    if not (0 <= nb < na <= 4):
+        raise ServoscopeError(f"order (nb, na) = ({nb}, {na}) is not supported: need 0 <= nb < na <= 4")
+    return nb, na
+
+
+def fit_fixed_order(
+    fr: FrequencyResponse,
+    order: tuple[int, int] | Sequence[int],
+    *,
+    mode: str = "magnitude",
+    zeros: str = "minimum_phase",
+    bootstrap: int = 0,
+    seed: int | None = 0,
+    n_starts: int | None = None,
+    jackknife: bool = True,
+    who: str = "fit_transfer_function",
+) -> TransferFunctionFit:
+    """Fit a model of the given order ``(nb, na)``; the options as :func:`~servoscope.sysid.fit_transfer_function`'s.
+
+    Raises
+    ------
+    ServoscopeError
+        Bad options, or data that cannot determine the model (the message starts with `who`).
+    """
+    check_fit_options(who, mode, zeros, bootstrap)
+    nb, na = check_order(order)
+    # Wild starting points and undetermined parameters can overflow on the
+    # way; every result is checked for finiteness below, so numpy's warnings
+    # would only be noise (and errors under pytest's filter).
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        return _fit_fixed_order(fr, nb, na, mode, zeros, bootstrap, seed, n_starts, who, jackknife)
+
+
+def _fit_fixed_order(
+    fr: FrequencyResponse, nb: int, na: int, mode: str, zeros: str, bootstrap: int,
+    seed: int | None, n_starts: int | None, who: str, jackknife: bool = True,
+) -> TransferFunctionFit:
+    d, warns = prepare_fit_data(fr, mode, who)
+    w_ref = float(math.exp(np.mean(np.log(d.w)))) if d.n else 1.0
+    st = Structure(nb, na, zeros, mode == "complex", w_ref)
+    problem = identifiability_problem(d, st, mode)
+    if problem is not None:
+        raise ServoscopeError(f"{who}: {problem}")
+    if n_starts is None:
+        # Free zeros add local minima (an RHP zero's phase lag mimics a
+        # delay), so they get more starts.
+        n_starts = max(3 * N_STARTS, 4 * st.n_params) if zeros == "free" else max(N_STARTS, 2 * st.n_params)
+    sol = multistart(st, d, mode == "complex", n_starts)
+    if sol is None:
+        raise ServoscopeError(f"{who}: the optimizer failed from every starting point (non-finite data?)")
+    fit = build_fit(st, d, fr, sol, mode, warns)
+    if jackknife:
+        fit = with_jackknife(fit, d)
+    if bootstrap:
+        samples, ci_b, bw = bootstrap_dwells(fit, d, int(bootstrap), seed)
+        fit = replace(
+            fit,
+            bootstrap_samples=readonly(samples),
+            ci95_bootstrap=ci_b,
+            warnings=fit.warnings + tuple(bw),
+        )
+    return fit
