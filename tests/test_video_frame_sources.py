@@ -331,3 +331,15 @@ def test_manifest_frames_with_fps(tmp_path):
         manifest.write_text(MANIFEST.format(source=source))
         with pytest.raises(ServoscopeError, match=expected.replace("(", r"\(").replace(")", r"\)")):
             load_campaign(manifest)
+
+
+def test_markers_command_on_a_sequence(tmp_path):
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    for i in range(3):
+        img = np.full((60, 80, 3), 90, np.uint8)
+        cv2.circle(img, (30 + i, 30), 8, (40, 39, 214), -1)  # BGR of #d62728
+        cv2.imwrite(str(folder / f"f{i}.png"), img)
+    proc = run_cli("markers", folder, "--fps", 100, "--frame", 2)
+    assert proc.returncode == 0, proc.stderr
+    assert "seq, frame 2 (t = 0.020 s)" in proc.stdout and "#d62728" in proc.stdout.lower(), proc.stdout

@@ -294,8 +294,10 @@ def info(footage: Path, as_json: bool, **source) -> None:
 @click.argument("video", type=click.Path(path_type=Path))
 @click.option("--frame", "frame_index", default=0, show_default=True, type=int, help="Frame to look at (0-based).")
 @click.option("--out", "out_png", type=click.Path(dir_okay=False, path_type=Path), help="Picture with the candidates numbered (PNG).")
-def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
+@_frame_source_options
+def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> None:
     """List the coloured blobs in a frame of VIDEO, to choose the marker colours."""
+    video, name, _ = _footage(video, **source)
     import cv2
     from rich.console import Console
     from rich.table import Table
@@ -313,7 +315,7 @@ def markers(video: Path, frame_index: int, out_png: Path | None) -> None:
     if chosen is None:
         raise ServoscopeError(f"{video}: has no frame {frame_index}")
     found = find_candidates(chosen.rgb)
-    table = Table(title=f"{video.name}, frame {frame_index} (t = {chosen.time_s:.3f} s): coloured blobs")
+    table = Table(title=f"{name}, frame {frame_index} (t = {chosen.time_s:.3f} s): coloured blobs")
     for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)", "solidity", "at border"):
         table.add_column(name, justify="right")
     for c in found:
