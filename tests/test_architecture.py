@@ -183,7 +183,6 @@ MAX_LINES = 650
 KNOWN_LARGE: set[str] = {
     'servoscope.markers.kernels',
     'servoscope.markers.tracker',
-    'servoscope.sysid.sine',
 }
 
 

@@ -338,7 +338,7 @@ def test_hac_covariance_is_the_newey_west_formula():
 
 def test_stderr_is_honest_for_correlated_noise():
     """AR(1) noise (φ = 0.8): the white-noise formula's stderr is too small; HAC's is not."""
-    import servoscope.sysid.sine as sine_mod
+    import servoscope.sysid.hac as hac_mod
 
     t = frames(4.0)
     clean = sine(t, 0.02, 0.7, 0.4)
@@ -354,10 +354,10 @@ def test_stderr_is_honest_for_correlated_noise():
         amps.append(r.amplitude)
         se_hac.append(r.amplitude_stderr)
         try:
-            sine_mod._HAC = False
+            hac_mod.USE_HAC = False
             se_white.append(fit_sine(t, y, 0.7, t0_s=T0, settle_s=0.2, refine_frequency=False).amplitude_stderr)
         finally:
-            sine_mod._HAC = True
+            hac_mod.USE_HAC = True
     emp = np.std(amps, ddof=1)
     # Spectral density of AR(1) at low frequency is (1+φ)/(1-φ) = 9 times the white one's.
     assert emp / np.mean(se_white) > 2.0
