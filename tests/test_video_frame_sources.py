@@ -343,3 +343,25 @@ def test_markers_command_on_a_sequence(tmp_path):
     proc = run_cli("markers", folder, "--fps", 100, "--frame", 2)
     assert proc.returncode == 0, proc.stderr
     assert "seq, frame 2 (t = 0.020 s)" in proc.stdout and "#d62728" in proc.stdout.lower(), proc.stdout
+
+
+def test_real_text_cih_save_step(tmp_path):
+    """pyMRAW's real FASTCAM SA-Z text header: 60,000 frames/s saved every 36th, 49300 frames after the trigger."""
+    from servoscope.video.highspeed import read_cih
+
+    cih = read_cih(DATA / "sample_60k_16bit.cih")
+    assert (cih["Record Rate(fps)"], cih["save_step"], cih["start_frame"], cih["Total Frame"]) == (60000, 36, 49300, 12)
+    header = tmp_path / "sample_60k_16bit.cih"
+    header.write_bytes((DATA / "sample_60k_16bit.cih").read_bytes())
+    with pytest.raises(ServoscopeError, match="without its sample_60k_16bit.mraw"):
+        probe_video(header)
+    values = np.arange(12 * 368 * 896, dtype=np.uint64) % 4096
+    values.astype("<u2").tofile(tmp_path / "sample_60k_16bit.mraw")
+    info = probe_video(header)
+    assert info.frame_rate_hz == pytest.approx(60000 / 36) and info.bit_depth == 12 and info.frame_count == 12
+    source = open_frame_source(header)
+    try:
+        assert source.header.trigger_s == pytest.approx(49300 / 60000)
+        assert np.array_equal(source.read(11), values[11 * 368 * 896:].reshape(368, 896))
+    finally:
+        source.close()
