@@ -365,3 +365,28 @@ def test_real_text_cih_save_step(tmp_path):
         assert np.array_equal(source.read(11), values[11 * 368 * 896:].reshape(368, 896))
     finally:
         source.close()
+
+
+def test_reader_thread_errors_and_early_stop(tmp_path):
+    import threading
+
+    for i in range(10):
+        size = (8, 10) if i == 5 else (8, 8)
+        cv2.imwrite(str(tmp_path / f"f{i}.png"), np.zeros((*size, 3), np.uint8))
+    source = frame_source(tmp_path, fps=10)
+    seen = []
+    with pytest.raises(ServoscopeError, match=r"f5\.png: uint8 frame of 10×8×3 in a sequence of uint8 frames of 8×8×3"):
+        for frame in iter_yuv_frames(source):
+            seen.append(frame.index)
+    assert seen == [0, 1, 2, 3, 4]  # the frames before the bad one, in order
+    frames = iter_yuv_frames(source, queue_size=2)
+    assert next(frames).index == 0
+    frames.close()  # the reader thread stops with the generator
+    assert not any(t.name == "servoscope-read-frames" for t in threading.enumerate())
+
+
+def test_truncated_mraw(tmp_path):
+    (tmp_path / "beam.cihx").write_bytes((DATA / "beam.cihx").read_bytes())
+    (tmp_path / "beam.mraw").write_bytes((DATA / "beam.mraw").read_bytes()[:400_000])
+    with pytest.raises(ServoscopeError, match=r"beam\.mraw: truncated: 400000 bytes hold 2 of the 4 frames"):
+        probe_video(tmp_path / "beam.mraw")

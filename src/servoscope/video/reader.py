@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import ServoscopeError
 from .colour import layout_of_format
 from .frame_source import is_frame_source, to_rgb8, to_yuv420
-from .sources import iter_source, open_frame_source
+from .sources import iter_source, open_frame_source, prefetch
 from .planes import (frame_layout, frame_rgb, i420_of_planes, native_planes, quarter_turns,  # noqa: F401
                      yuv_planes)
 
@@ -544,8 +544,8 @@ def iter_yuv_frames(path: str | Path, *, threads: int = 0, fields: str | None = 
 
     _check_fields(path, fields)
     if is_frame_source(path):
-        # One frame read and converted at a time, in this thread: memory flat.
-        yield from (YuvFrame(i, t, *yuv, yuv[0]) for i, t, yuv in iter_source(path, to_yuv420))
+        # Frames read and converted one at a time on a reader thread, queue_size ahead: memory flat.
+        yield from (YuvFrame(i, t, *yuv, yuv[0]) for i, t, yuv in prefetch(iter_source(path, to_yuv420), queue_size))
         return
     path = Path(path)
     q: _queue.Queue = _queue.Queue(maxsize=max(1, int(queue_size)))

@@ -17,7 +17,7 @@ from .frame_source import FrameSource, parse_frame_source
 from .highspeed import PhantomCine, PhotronMraw
 from .sequence import ImageSequence
 
-__all__ = ["open_frame_source", "iter_source", "frame_source_digest"]
+__all__ = ["open_frame_source", "iter_source", "frame_source_digest", "prefetch"]
 
 
 def open_frame_source(path: str | Path) -> FrameSource:
@@ -63,3 +63,63 @@ def frame_source_digest(path: str | Path, file_digest: Callable[[str], str]) -> 
     for f in files + ((spec.timestamps,) if spec.timestamps else ()):
         h.update(file_digest(f).encode())
     return h.hexdigest()
+
+
+_END = object()
+
+
+def prefetch(items: Iterator, queue_size: int = 8) -> Iterator:
+    """``items`` made on a reader thread, up to ``queue_size`` ahead of the caller.
+
+    Reading and decompressing a frame file (tifffile, OpenCV and zlib release
+    the GIL) then overlaps the caller's tracking, as the video decoder thread
+    does for video; memory stays bounded by the queue. An exception in the
+    reader is raised in the caller, at the item where it happened; closing
+    the generator stops the reader.
+    """
+    import queue as _queue
+    import threading
+
+    q: _queue.Queue = _queue.Queue(maxsize=max(1, int(queue_size)))
+    stop = threading.Event()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except _queue.Full:
+                continue
+        return False
+
+    def run() -> None:
+        try:
+            for item in items:
+                if not put(item):
+                    return
+            put(_END)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller
+            put(exc)
+        finally:
+            close = getattr(items, "close", None)
+            if close is not None:
+                close()
+
+    worker = threading.Thread(target=run, name="servoscope-read-frames", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = q.get()
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while worker.is_alive():
+            try:
+                q.get(timeout=0.05)
+            except _queue.Empty:
+                pass
+        worker.join()
