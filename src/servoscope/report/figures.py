@@ -16,6 +16,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from ..sysid.plotting import (  # noqa: E402
+    plot_dwell,
+    plot_dwell_residual,
+    plot_gain,
+    plot_model_gain,
+    plot_model_phase,
+    plot_phase,
+    plot_step,
+)
+
 __all__ = ["bode_figure", "dwell_figure", "step_figure", "overlay_figure", "segmentation_figure"]
 
 
@@ -49,12 +59,8 @@ def bode_figure(
     fig, axes = plt.subplots(2 if with_phase else 1, 1, figsize=(7.5, 6.2 if with_phase else 4.2), sharex=True, squeeze=False)
     ax = axes[0, 0]
     omega = 2 * np.pi * np.asarray(frequency_hz)
-    gain_db = 20 * np.log10(np.asarray(gain))
-    yerr = None
-    if gain_stderr is not None:
-        yerr = 20 / np.log(10) * np.asarray(gain_stderr) / np.asarray(gain)
-    ax.errorbar(omega, gain_db, yerr=yerr, fmt="o", ms=5, color="C0", capsize=3, label="measured")
-    ax.semilogx(2 * np.pi * np.asarray(model_frequency_hz), 20 * np.log10(np.asarray(model_gain)), "-", color="C1", label=label)
+    plot_gain(ax, omega, gain, gain_stderr)
+    plot_model_gain(ax, 2 * np.pi * np.asarray(model_frequency_hz), model_gain, label=label)
     if truth_gain is not None:
         ax.semilogx(2 * np.pi * np.asarray(model_frequency_hz), 20 * np.log10(np.asarray(truth_gain)), "--", color="0.5", lw=1, label="truth")
     if bandwidth_rad_s is not None and np.isfinite(bandwidth_rad_s):
@@ -66,9 +72,9 @@ def bode_figure(
     ax.legend(loc="lower left", fontsize=8)
     if with_phase:
         axp = axes[1, 0]
-        axp.plot(omega, phase_deg, "o", ms=5, color="C0", label="measured")
+        plot_phase(axp, omega, phase_deg)
         if model_phase_deg is not None:
-            axp.plot(2 * np.pi * np.asarray(model_frequency_hz), model_phase_deg, "-", color="C1", label=label)
+            plot_model_phase(axp, 2 * np.pi * np.asarray(model_frequency_hz), model_phase_deg, label=label)
         axp.set_ylabel("phase (deg)")
         axp.grid(True, which="both", alpha=0.3)
         axp.legend(loc="lower left", fontsize=8)
@@ -91,18 +97,11 @@ def dwell_figure(
     time_s = np.asarray(time_s)
     valid = np.asarray(valid, bool)
     fig, (ax, axr) = plt.subplots(2, 1, figsize=(7.5, 5.4), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-    ax.plot(time_s[valid], angle_rad[valid], ".", ms=3, color="C0", label="measured")
-    inwin = valid & (time_s >= window_s[0]) & (time_s <= window_s[1])
-    ax.plot(time_s[inwin], fit_angle_rad[inwin], "-", color="C1", lw=1.2, label="fitted sine")
-    for a in (ax, axr):
-        a.axvspan(window_s[0], window_s[1], color="C2", alpha=0.06)
-        if t0_s is not None:
-            a.axvline(t0_s, color="k", ls=":", lw=1)
-        a.grid(True, alpha=0.3)
+    plot_dwell(ax, time_s, angle_rad, fit_angle_rad, window_s, valid=valid, t0_s=t0_s)
+    plot_dwell_residual(axr, time_s, angle_rad, fit_angle_rad, window_s, valid=valid, t0_s=t0_s)
     ax.set_ylabel("angle (rad)")
     ax.set_title(title or "Dwell: measured angle and fitted sine (paper Fig. 7)")
     ax.legend(loc="upper right", fontsize=8)
-    axr.plot(time_s[inwin], angle_rad[inwin] - fit_angle_rad[inwin], "-", color="C3", lw=0.8)
     axr.set_ylabel("residual (rad)")
     axr.set_xlabel("time (s)")
     axr.set_title("Residual (paper Fig. 8)", fontsize=9)
@@ -123,13 +122,7 @@ def step_figure(
     time_s = np.asarray(time_s)
     valid = np.asarray(valid, bool)
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    ax.plot(time_s[valid], angle_rad[valid], ".", ms=3, color="C0", label="measured")
-    if predicted_angle_rad is not None:
-        ax.plot(time_s, predicted_angle_rad, "-", color="C1", lw=1.4, label="predicted (identified model)")
-    if t0_s is not None:
-        ax.axvline(t0_s, color="k", ls=":", lw=1, label="input start (LED off)")
-        if dead_time_s is not None:
-            ax.axvline(t0_s + dead_time_s, color="C2", ls="--", lw=1, label=f"dead time {1e3 * dead_time_s:.1f} ms")
+    plot_step(ax, time_s, angle_rad, predicted_angle_rad, valid=valid, t0_s=t0_s, dead_time_s=dead_time_s)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("angle (rad)")
     ax.set_title("Step response: measured and predicted (paper Fig. 10)")

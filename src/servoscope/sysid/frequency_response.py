@@ -8,14 +8,18 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
 from servoscope.results import import_pandas, jsonable
-from servoscope.sysid.sine import SineFit
+from servoscope.sysid.plotting import new_axes, plot_gain, plot_phase
+from servoscope.sysid.sine_result import SineFit
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["FrequencyResponse"]
 
@@ -238,6 +242,11 @@ class FrequencyResponse:
         return np.radians(self.phase_deg)
 
     @property
+    def phase_stderr_rad(self) -> NDArray[np.float64]:
+        """`phase_stderr_deg` in rad (NaN where unknown)."""
+        return np.radians(self.phase_stderr_deg)
+
+    @property
     def has_phase(self) -> bool:
         """True when at least one point has a known phase."""
         return bool(np.any(np.isfinite(self.phase_deg)))
@@ -345,6 +354,29 @@ class FrequencyResponse:
             raise ServoscopeError("FrequencyResponse.to_frd: no point has a known phase (t0 missing)")
         resp = self.gain[known] * np.exp(1j * np.radians(self.phase_deg[known]))
         return control.frd(resp, self.omega_rad_s[known])
+
+    def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
+        """Draw the gains in dB (±1 standard error bars) against ω on `ax`, the phases on `phase_ax`.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes for the gains (log ω axis); a new figure's when None.
+        phase_ax : matplotlib.axes.Axes, optional
+            Axes for the phases in degrees (not drawn when None).
+
+        Returns
+        -------
+        list
+            The gains' ``ErrorbarContainer`` (its line: x = `omega_rad_s`, y = `gain_db`) and,
+            with `phase_ax`, the phases' line (y = `phase_deg`).
+        """
+        ax = new_axes(ax)
+        artists: list[Any] = [plot_gain(ax, self.omega_rad_s, self.gain, self.gain_stderr)]
+        ax.set_xscale("log")
+        if phase_ax is not None:
+            artists.append(plot_phase(phase_ax, self.omega_rad_s, self.phase_deg))
+        return artists
 
     def _repr_html_(self) -> str:
         head = "".join(f"<th>{c}</th>" for c in ("video", "f [Hz]", "gain", "gain [dB]", "phase [deg]", "fidelity"))

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.results import html_table, import_pandas, jsonable
+from servoscope.sysid.plotting import new_axes, plot_dwell
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["SineFit", "wrap_pi"]
 
@@ -160,6 +164,11 @@ class SineFit:
         """`phase_rad` in degrees (None when unknown)."""
         return None if self.phase_rad is None else math.degrees(self.phase_rad)
 
+    @property
+    def phase_stderr_deg(self) -> float | None:
+        """`phase_stderr_rad` in degrees (None when unknown)."""
+        return None if self.phase_stderr_rad is None else math.degrees(self.phase_stderr_rad)
+
     def model(self, time_s: ArrayLike) -> NDArray[np.float64]:
         """Evaluate the fitted sinusoid.
 
@@ -230,6 +239,18 @@ class SineFit:
                 "residual": np.asarray(self.residual),
             }
         )
+
+    def plot(self, ax: Axes | None = None) -> list[Any]:
+        """Draw the window's samples, the fitted sine and the window on `ax` (a new figure's when None).
+
+        Returns
+        -------
+        list
+            The artists (:func:`~servoscope.sysid.plotting.plot_dwell`): the measured line
+            (x = `time_s`, y = `y`), the fitted line (y = ``model(time_s)``), the window's span
+            and, when `t0_s` is known, its line.
+        """
+        return plot_dwell(new_axes(ax), self.time_s, self.y, self.model(self.time_s), self.window_s, t0_s=self.t0_s)
 
     def _repr_html_(self) -> str:
         return html_table(self.summary(), "SineFit")

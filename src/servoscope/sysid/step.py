@@ -43,8 +43,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
 
 import control
 import numpy as np
@@ -53,157 +51,13 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import html_table, import_pandas, jsonable, readonly
+from servoscope.results import readonly
+from servoscope.sysid.step_result import StepAnalysis
 
 __all__ = ["StepAnalysis", "analyse_step", "model_step_metrics"]
 
 _SETTLING_BAND = 0.02
 _RISE_LIMITS = (0.1, 0.9)
-
-
-@dataclass(frozen=True)
-class StepAnalysis:
-    """Result of :func:`analyse_step`.
-
-    Attributes
-    ----------
-    t0_s : float
-        Step time in s.
-    step_size : float
-        Input step (input units).
-    initial_value, final_value : float
-        Output before the step and at the end (output units, e.g. rad).
-    change : float
-        ``final_value - initial_value``.
-    gain : float
-        Measured static gain ``change / step_size``.
-    rise_time_s : float
-        10-90 % rise time in s (NaN when not measurable).
-    overshoot_pct : float
-        Peak overshoot in percent of the change (>= 0).
-    peak_time_s : float
-        Time of the peak after ``t0_s``, in s.
-    settling_time_s : float
-        2 % settling time measured from ``t0_s``, in s (NaN if not settled).
-    dead_time_s : float or None
-        Dead time from the model fit, in s (None without a model).
-    dead_time_stderr_s : float or None
-        Its standard error in s.
-    dead_time_threshold_s : float
-        Frame-counting dead-time estimate in s (NaN if never exceeded).
-    fitted_gain, fitted_gain_stderr, fitted_baseline : float or None
-        Model-fit ``g`` (output per input unit), its standard error, and
-        ``b`` (output units).
-    noise_sigma : float
-        Robust noise estimate, output units.
-    warnings : tuple of str
-        Non-fatal problems.
-    time_s, y : numpy.ndarray
-        Valid samples used (s, output units).
-    predicted_metrics : dict or None
-        The model's own step metrics (:func:`model_step_metrics` with the
-        fitted dead time, scaled to this step), for comparison with the
-        measured ones; None without a model.
-    """
-
-    t0_s: float
-    step_size: float
-    initial_value: float
-    final_value: float
-    change: float
-    gain: float
-    rise_time_s: float
-    overshoot_pct: float
-    peak_time_s: float
-    settling_time_s: float
-    dead_time_s: float | None
-    dead_time_stderr_s: float | None
-    dead_time_threshold_s: float
-    fitted_gain: float | None
-    fitted_gain_stderr: float | None
-    fitted_baseline: float | None
-    noise_sigma: float
-    warnings: tuple[str, ...]
-    time_s: NDArray[np.float64] = field(repr=False, compare=False)
-    y: NDArray[np.float64] = field(repr=False, compare=False)
-    _unit_step: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = field(
-        default=None, repr=False, compare=False
-    )
-    predicted_metrics: dict[str, float] | None = field(default=None, compare=False)
-
-    def predicted(self, time_s: ArrayLike) -> NDArray[np.float64]:
-        """Model prediction ``b + g*step_size*s(t - t0 - tau)`` at `time_s`.
-
-        Parameters
-        ----------
-        time_s : array_like
-            Times in s.
-
-        Returns
-        -------
-        numpy.ndarray
-            Predicted output, output units.
-
-        Raises
-        ------
-        ServoscopeError
-            When the analysis was run without a model.
-        """
-        if self._unit_step is None or self.dead_time_s is None:
-            raise ServoscopeError("StepAnalysis.predicted: analyse_step was called without a model")
-        t = np.asarray(time_s, dtype=float)
-        assert self.fitted_baseline is not None and self.fitted_gain is not None
-        return self.fitted_baseline + self.fitted_gain * self.step_size * self._unit_step(
-            t - self.t0_s - self.dead_time_s
-        )
-
-    @property
-    def residual(self) -> NDArray[np.float64] | None:
-        """``y - predicted`` for samples at or after ``t0_s`` (None without a model)."""
-        if self._unit_step is None:
-            return None
-        sel = self.time_s >= self.t0_s
-        return self.y[sel] - self.predicted(self.time_s[sel])
-
-    def summary(self) -> dict[str, Any]:
-        """Scalar results as a JSON-serializable dict (NaN -> None).
-
-        Includes ``predicted``: the model's metrics (rise_time_s,
-        overshoot_pct, settling_time_s, peak_time_s from t0 with the fitted
-        dead time, final_change = model DC gain * step) or None.
-        """
-        return jsonable(
-            {
-                "rise_time_s": self.rise_time_s,
-                "overshoot_pct": self.overshoot_pct,
-                "settling_time_s": self.settling_time_s,
-                "peak_time_s": self.peak_time_s,
-                "dead_time_s": self.dead_time_s,
-                "dead_time_stderr_s": self.dead_time_stderr_s,
-                "dead_time_threshold_s": self.dead_time_threshold_s,
-                "final_value": self.final_value,
-                "initial_value": self.initial_value,
-                "gain": self.gain,
-                "fitted_gain": self.fitted_gain,
-                "fitted_gain_stderr": self.fitted_gain_stderr,
-                "noise_sigma": self.noise_sigma,
-                "t0_s": self.t0_s,
-                "step_size": self.step_size,
-                "predicted": None if self.predicted_metrics is None else dict(self.predicted_metrics),
-                "warnings": list(self.warnings),
-            }
-        )
-
-    def to_pandas(self) -> Any:
-        """Samples (and model prediction if any) as a DataFrame. Needs pandas."""
-        pd = import_pandas()
-        data: dict[str, Any] = {"time_s": np.asarray(self.time_s), "y": np.asarray(self.y)}
-        if self._unit_step is not None:
-            data["predicted"] = self.predicted(self.time_s)
-        return pd.DataFrame(data)
-
-    def _repr_html_(self) -> str:
-        return html_table(self.summary(), "StepAnalysis")
 
 
 def _moving_average3(r: NDArray[np.float64]) -> NDArray[np.float64]:

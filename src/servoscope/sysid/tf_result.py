@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import control
 import numpy as np
@@ -22,6 +22,10 @@ from servoscope.results import import_pandas, jsonable
 from servoscope.sysid._rational import Structure, continuous_phase_rad, log_response
 from servoscope.sysid._tf_metrics import bandwidth_rad_s, j_rating
 from servoscope.sysid.frequency_response import FrequencyResponse
+from servoscope.sysid.plotting import new_axes, plot_model_gain, plot_model_phase
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["OrderSelection", "TransferFunctionFit"]
 
@@ -298,6 +302,42 @@ class TransferFunctionFit:
                 "model_phase_deg": np.degrees(self.phase_rad(w)),
             }
         )
+
+    def plot(
+        self, ax: Axes | None = None, *, phase_ax: Axes | None = None, omega_rad_s: ArrayLike | None = None
+    ) -> list[Any]:
+        """Draw the fitted data (:meth:`FrequencyResponse.plot`) and the model's gain (and phase) on `ax`.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes for the gains in dB (a new figure's when None).
+        phase_ax : matplotlib.axes.Axes, optional
+            Axes for the phases in degrees (the model's includes the dead time when fitted).
+        omega_rad_s : array_like, optional
+            Where to draw the model; default 300 points from half the lowest to twice the
+            highest measured frequency (0.1 to 100 rad/s without data).
+
+        Returns
+        -------
+        list
+            The data's artists (when data are attached), then the model's gain line (x =
+            `omega_rad_s`, y = ``20*log10(magnitude(omega_rad_s))``) and, with `phase_ax`, its
+            phase line.
+        """
+        ax = new_axes(ax)
+        artists: list[Any] = []
+        if self.data is not None:
+            artists += self.data.plot(ax, phase_ax=phase_ax)
+        if omega_rad_s is None:
+            w = self.data.omega_rad_s if self.data is not None else np.array([0.2, 50.0])
+            w = w[np.isfinite(w) & (w > 0)]
+            omega_rad_s = np.logspace(np.log10(w.min() / 2), np.log10(w.max() * 2), 300)
+        w = np.asarray(omega_rad_s, dtype=float)
+        artists.append(plot_model_gain(ax, w, self.magnitude(w)))
+        if phase_ax is not None:
+            artists.append(plot_model_phase(phase_ax, w, self.phase_deg(w)))
+        return artists
 
     def _repr_html_(self) -> str:
         head = "<tr><th>parameter</th><th>value</th><th>std. error</th><th>95 % interval</th></tr>"
