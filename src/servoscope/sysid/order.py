@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -166,6 +166,37 @@ def select_order(
     if not fits:
         raise ServoscopeError(f"select_order: no candidate order can be fitted: {first_problem}")
 
+    fits, phi, chosen = _choose(fits, criterion)
+
+    slope, slope_se = estimate_slope_db_per_decade(fr)
+    rel = None if not math.isfinite(slope) else max(1, int(math.floor(-slope / 20.0 + 0.5)))
+    if rel is not None and chosen[1] - chosen[0] < rel:
+        warns.append(
+            f"the chosen order {chosen} rolls off at {-20 * (chosen[1] - chosen[0])} dB/decade but the data fall at "
+            f"{slope:.1f} dB/decade at the highest frequencies"
+        )
+    rows = _table_rows(fits, chosen)
+    return OrderSelection(
+        table=tuple(rows),
+        best=fits[chosen],
+        fits=fits,
+        criterion=criterion,
+        mode=mode,
+        slope_db_per_decade=slope,
+        slope_stderr_db_per_decade=slope_se,
+        relative_degree_estimate=rel,
+        noise_scale=phi,
+        warnings=tuple(warns),
+    )
+
+
+def _choose(
+    fits: dict[tuple[int, int], TransferFunctionFit], criterion: str
+) -> tuple[dict[tuple[int, int], TransferFunctionFit], float, tuple[int, int]]:
+    """The candidates with their criteria rescaled by the noise scale, the scale, and the choice.
+
+    See the module docstring, "Choice" and the criteria.
+    """
     # Noise scale from the best-fitting determined candidate (see docstring).
     red = [2.0 * f.cost / (f.n_residuals - f.n_params) for f in fits.values() if not f.undetermined]
     phi = max(1.0, min(red)) if red else 1.0
@@ -184,14 +215,11 @@ def select_order(
     best_score = min(getattr(fits[o], key) for o in eligible)
     near = [o for o in eligible if getattr(fits[o], key) <= best_score + CRITERION_TIE]
     chosen = min(near, key=lambda o: (fits[o].n_params, getattr(fits[o], key)))
+    return fits, phi, chosen
 
-    slope, slope_se = estimate_slope_db_per_decade(fr)
-    rel = None if not math.isfinite(slope) else max(1, int(math.floor(-slope / 20.0 + 0.5)))
-    if rel is not None and chosen[1] - chosen[0] < rel:
-        warns.append(
-            f"the chosen order {chosen} rolls off at {-20 * (chosen[1] - chosen[0])} dB/decade but the data fall at "
-            f"{slope:.1f} dB/decade at the highest frequencies"
-        )
+
+def _table_rows(fits: dict[tuple[int, int], TransferFunctionFit], chosen: tuple[int, int]) -> list[dict[str, Any]]:
+    """One row of :attr:`OrderSelection.table` per candidate, by ascending number of parameters."""
     rows = []
     for o in sorted(fits, key=lambda o: (fits[o].n_params, o)):
         f = fits[o]
@@ -209,15 +237,4 @@ def select_order(
                 "chosen": o == chosen,
             }
         )
-    return OrderSelection(
-        table=tuple(rows),
-        best=fits[chosen],
-        fits=fits,
-        criterion=criterion,
-        mode=mode,
-        slope_db_per_decade=slope,
-        slope_stderr_db_per_decade=slope_se,
-        relative_degree_estimate=rel,
-        noise_scale=phi,
-        warnings=tuple(warns),
-    )
+    return rows

@@ -216,129 +216,16 @@ def analyse_step(
         d = np.diff(yp[final_sel])
         sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0) if d.size else 0.0
 
-    nan = float("nan")
-    rise = overshoot = peak_time = settling = dead_thr = nan
-    if abs(change) <= max(10.0 * sigma, 0.0) or change == 0:
-        warns.append("no discernible step response (change within 10 noise sigma)")
-    else:
-        r = (yp - initial) / change
-        rs = _moving_average3(r)
-        # Peak (sub-frame via local quadratic).
-        k = int(np.argmax(rs))
-        peak_val = float(r[k])
-        peak_time = float(tp[k] - t0)
-        dt_med = float(np.median(np.diff(tp)))
-        if 2 <= k <= r.size - 3 and tp[k + 2] - tp[k - 2] <= 4.5 * dt_med:
-            tt = tp[k - 2 : k + 3] - tp[k]
-            c2, c1, c0 = np.polyfit(tt, r[k - 2 : k + 3], 2)
-            if c2 < 0:
-                tv = -c1 / (2 * c2)
-                if abs(tv) <= (tt[-1] - tt[0]) / 2:
-                    peak_val = float(c0 - c1**2 / (4 * c2))
-                    peak_time = float(tp[k] + tv - t0)
-        overshoot = max(0.0, 100.0 * (peak_val - 1.0))
-        # Rise: last upward crossing of each level before the peak.
-        seg = r[: k + 1]
-        tseg = tp[: k + 1]
-        cross = []
-        for level in _RISE_LIMITS:
-            below = np.nonzero(seg < level)[0]
-            if below.size == 0 or below[-1] + 1 >= seg.size:
-                cross.append(nan)
-            else:
-                i = int(below[-1])
-                cross.append(_cubic_cross(tseg, seg, i, level))
-        rise = cross[1] - cross[0]
-        if not math.isfinite(rise):
-            warns.append("rise time not measurable (10 % or 90 % level not crossed before the peak)")
-        # Settling (2 % band) on the mildly smoothed response.
-        dev = np.abs(rs - 1.0)
-        outside = np.nonzero(dev > _SETTLING_BAND)[0]
-        if outside.size == 0:
-            settling = 0.0
-        elif outside[-1] + 1 >= rs.size:
-            warns.append("response does not settle within the 2 % band before the end of the record")
-        else:
-            i = int(outside[-1])
-            settling = _interp_cross(tp[i], tp[i + 1], dev[i], dev[i + 1], _SETTLING_BAND) - t0
-        # Paper-style threshold dead time.
-        thr = max(5.0 * sigma, 0.02 * abs(change))
-        exceed = np.nonzero(np.abs(yp - initial) > thr)[0]
-        if exceed.size:
-            dead_thr = float(tp[exceed[0]] - t0)
+    rise, overshoot, peak_time, settling, dead_thr = _response_metrics(tp, yp, t0, initial, change, sigma, warns)
 
     dead = dead_se = g_fit = g_se = b_fit = None
     unit_step = None
     predicted_metrics: dict[str, float] | None = None
     if model is not None:
-        dts = np.diff(t)
-        dt_hint = float(np.median(dts)) if dts.size else 0.01
-        span = float(t_end - t0) + 1.0
-        unit_step = _unit_step_function(model, span, dt_hint)
-        u = tp - t0
-
-        def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
-            return p[0] + p[1] * step * unit_step(u - p[2]) - yp
-
-        def jac(p: NDArray[np.float64]) -> NDArray[np.float64]:
-            J = np.empty((u.size, 3))
-            J[:, 0] = 1.0
-            J[:, 1] = step * unit_step(u - p[2])
-            J[:, 2] = -p[1] * step * unit_step.derivative(u - p[2])  # type: ignore[attr-defined]
-            return J
-
-        g0 = change / step if change != 0 else 1.0
-        # Seeds: threshold estimate minus the model's own time to reach 2 %.
-        grid = np.linspace(0.0, span, 20001)
-        sg = unit_step(grid)
-        reach = np.nonzero(np.abs(sg) > 0.02)[0]
-        t_reach = float(grid[reach[0]]) if reach.size else 0.0
-        seeds = {0.0}
-        if math.isfinite(dead_thr):
-            seeds.add(max(dead_thr - t_reach, 0.0))
-            seeds.add(max(dead_thr - t_reach - dt_hint, 0.0))
-            seeds.add(max(dead_thr, 0.0))
-        best = None
-        for tau0 in sorted(seeds):
-            sol = least_squares(
-                resid,
-                np.array([initial, g0, tau0]),
-                jac=jac,
-                bounds=([-np.inf, -np.inf, 0.0], [np.inf, np.inf, span]),
-                method="trf",
-                xtol=1e-14,
-                ftol=1e-14,
-                gtol=1e-14,
-            )
-            if best is None or sol.cost < best.cost:
-                best = sol
-        assert best is not None
-        b_fit, g_fit, dead = (float(x) for x in best.x)
-        Jb = jac(best.x)
-        dof = u.size - 3
-        s2 = float(best.fun @ best.fun) / dof if dof > 0 else nan
-        try:
-            cov = np.linalg.inv(Jb.T @ Jb) * s2
-        except np.linalg.LinAlgError:
-            cov = np.linalg.pinv(Jb.T @ Jb) * s2
-            warns.append("singular Jacobian in the dead-time fit: standard errors are unreliable")
-        # The fit locates the motion's start; the dead time is counted from t0, whose own
-        # uncertainty (independent: the LED, not the blade) adds in quadrature.
-        dead_se = float(math.hypot(math.sqrt(max(cov[2, 2], 0.0)), t0_stderr_s or 0.0))
-        g_se = float(math.sqrt(max(cov[1, 1], 0.0)))
-        if dead <= 0.0:
-            warns.append("fitted dead time is at its lower bound 0")
-        try:
-            pm = model_step_metrics(model, dead_time_s=dead)
-            predicted_metrics = {
-                "rise_time_s": pm["rise_time_s"],
-                "overshoot_pct": pm["overshoot_pct"],
-                "settling_time_s": pm["settling_time_s"],
-                "peak_time_s": pm["peak_time_s"],
-                "final_change": pm["steady_state_value"] * step,
-            }
-        except (ServoscopeError, ValueError, ZeroDivisionError) as exc:
-            warns.append(f"model step metrics unavailable: {exc}")
+        dead, dead_se, g_fit, g_se, b_fit, unit_step = _dead_time_fit(
+            model, t, tp, yp, t0, step, initial, change, dead_thr, t_end, t0_stderr_s, warns
+        )
+        predicted_metrics = _predicted_metrics(model, dead, step, warns)
 
     return StepAnalysis(
         t0_s=t0,
@@ -364,6 +251,159 @@ def analyse_step(
         _unit_step=unit_step,
         predicted_metrics=predicted_metrics,
     )
+
+
+def _response_metrics(
+    tp: NDArray[np.float64], yp: NDArray[np.float64], t0: float, initial: float, change: float, sigma: float,
+    warns: list[str],
+) -> tuple[float, float, float, float, float]:
+    """Rise time, overshoot, peak time, settling time and threshold dead time (NaN when not measurable).
+
+    From the samples after the step (`tp`, `yp`), normalized by `initial` and `change`
+    (the module docstring gives the definitions); appends to `warns` what could not be measured.
+    """
+    nan = float("nan")
+    rise = overshoot = peak_time = settling = dead_thr = nan
+    if abs(change) <= max(10.0 * sigma, 0.0) or change == 0:
+        warns.append("no discernible step response (change within 10 noise sigma)")
+        return rise, overshoot, peak_time, settling, dead_thr
+    r = (yp - initial) / change
+    rs = _moving_average3(r)
+    # Peak (sub-frame via local quadratic).
+    k = int(np.argmax(rs))
+    peak_val = float(r[k])
+    peak_time = float(tp[k] - t0)
+    dt_med = float(np.median(np.diff(tp)))
+    if 2 <= k <= r.size - 3 and tp[k + 2] - tp[k - 2] <= 4.5 * dt_med:
+        tt = tp[k - 2 : k + 3] - tp[k]
+        c2, c1, c0 = np.polyfit(tt, r[k - 2 : k + 3], 2)
+        if c2 < 0:
+            tv = -c1 / (2 * c2)
+            if abs(tv) <= (tt[-1] - tt[0]) / 2:
+                peak_val = float(c0 - c1**2 / (4 * c2))
+                peak_time = float(tp[k] + tv - t0)
+    overshoot = max(0.0, 100.0 * (peak_val - 1.0))
+    # Rise: last upward crossing of each level before the peak.
+    seg = r[: k + 1]
+    tseg = tp[: k + 1]
+    cross = []
+    for level in _RISE_LIMITS:
+        below = np.nonzero(seg < level)[0]
+        if below.size == 0 or below[-1] + 1 >= seg.size:
+            cross.append(nan)
+        else:
+            i = int(below[-1])
+            cross.append(_cubic_cross(tseg, seg, i, level))
+    rise = cross[1] - cross[0]
+    if not math.isfinite(rise):
+        warns.append("rise time not measurable (10 % or 90 % level not crossed before the peak)")
+    # Settling (2 % band) on the mildly smoothed response.
+    dev = np.abs(rs - 1.0)
+    outside = np.nonzero(dev > _SETTLING_BAND)[0]
+    if outside.size == 0:
+        settling = 0.0
+    elif outside[-1] + 1 >= rs.size:
+        warns.append("response does not settle within the 2 % band before the end of the record")
+    else:
+        i = int(outside[-1])
+        settling = _interp_cross(tp[i], tp[i + 1], dev[i], dev[i + 1], _SETTLING_BAND) - t0
+    # Paper-style threshold dead time.
+    thr = max(5.0 * sigma, 0.02 * abs(change))
+    exceed = np.nonzero(np.abs(yp - initial) > thr)[0]
+    if exceed.size:
+        dead_thr = float(tp[exceed[0]] - t0)
+    return rise, overshoot, peak_time, settling, dead_thr
+
+
+def _dead_time_fit(
+    model: control.TransferFunction | control.StateSpace, t: NDArray[np.float64], tp: NDArray[np.float64],
+    yp: NDArray[np.float64], t0: float, step: float, initial: float, change: float, dead_thr: float, t_end: float,
+    t0_stderr_s: float | None, warns: list[str],
+) -> tuple[float, float, float, float, float, Callable[[NDArray[np.float64]], NDArray[np.float64]]]:
+    """Baseline, gain and dead time of `model`'s step response fitted to the samples after the step.
+
+    Returns ``(dead, dead_se, g_fit, g_se, b_fit, unit_step)``: the dead time and fitted gain with
+    their standard errors (t0's uncertainty added to the dead time's), the baseline, and the
+    model's unit-step spline.
+    """
+    nan = float("nan")
+    dts = np.diff(t)
+    dt_hint = float(np.median(dts)) if dts.size else 0.01
+    span = float(t_end - t0) + 1.0
+    unit_step = _unit_step_function(model, span, dt_hint)
+    u = tp - t0
+
+    def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        return p[0] + p[1] * step * unit_step(u - p[2]) - yp
+
+    def jac(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        J = np.empty((u.size, 3))
+        J[:, 0] = 1.0
+        J[:, 1] = step * unit_step(u - p[2])
+        J[:, 2] = -p[1] * step * unit_step.derivative(u - p[2])  # type: ignore[attr-defined]
+        return J
+
+    g0 = change / step if change != 0 else 1.0
+    # Seeds: threshold estimate minus the model's own time to reach 2 %.
+    grid = np.linspace(0.0, span, 20001)
+    sg = unit_step(grid)
+    reach = np.nonzero(np.abs(sg) > 0.02)[0]
+    t_reach = float(grid[reach[0]]) if reach.size else 0.0
+    seeds = {0.0}
+    if math.isfinite(dead_thr):
+        seeds.add(max(dead_thr - t_reach, 0.0))
+        seeds.add(max(dead_thr - t_reach - dt_hint, 0.0))
+        seeds.add(max(dead_thr, 0.0))
+    best = None
+    for tau0 in sorted(seeds):
+        sol = least_squares(
+            resid,
+            np.array([initial, g0, tau0]),
+            jac=jac,
+            bounds=([-np.inf, -np.inf, 0.0], [np.inf, np.inf, span]),
+            method="trf",
+            xtol=1e-14,
+            ftol=1e-14,
+            gtol=1e-14,
+        )
+        if best is None or sol.cost < best.cost:
+            best = sol
+    assert best is not None
+    b_fit, g_fit, dead = (float(x) for x in best.x)
+    Jb = jac(best.x)
+    dof = u.size - 3
+    s2 = float(best.fun @ best.fun) / dof if dof > 0 else nan
+    try:
+        cov = np.linalg.inv(Jb.T @ Jb) * s2
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(Jb.T @ Jb) * s2
+        warns.append("singular Jacobian in the dead-time fit: standard errors are unreliable")
+    # The fit locates the motion's start; the dead time is counted from t0, whose own
+    # uncertainty (independent: the LED, not the blade) adds in quadrature.
+    dead_se = float(math.hypot(math.sqrt(max(cov[2, 2], 0.0)), t0_stderr_s or 0.0))
+    g_se = float(math.sqrt(max(cov[1, 1], 0.0)))
+    if dead <= 0.0:
+        warns.append("fitted dead time is at its lower bound 0")
+    return dead, dead_se, g_fit, g_se, b_fit, unit_step
+
+
+def _predicted_metrics(
+    model: control.TransferFunction | control.StateSpace, dead: float, step: float, warns: list[str]
+) -> dict[str, float] | None:
+    """The model's step metrics with the fitted dead time (None, with a warning, when unavailable)."""
+    predicted_metrics: dict[str, float] | None = None
+    try:
+        pm = model_step_metrics(model, dead_time_s=dead)
+        predicted_metrics = {
+            "rise_time_s": pm["rise_time_s"],
+            "overshoot_pct": pm["overshoot_pct"],
+            "settling_time_s": pm["settling_time_s"],
+            "peak_time_s": pm["peak_time_s"],
+            "final_change": pm["steady_state_value"] * step,
+        }
+    except (ServoscopeError, ValueError, ZeroDivisionError) as exc:
+        warns.append(f"model step metrics unavailable: {exc}")
+    return predicted_metrics
 
 
 def model_step_metrics(tf: control.TransferFunction, *, dead_time_s: float = 0.0) -> dict[str, float]:
