@@ -188,6 +188,10 @@ def test_options_round_trip():
     assert parse_frame_source(str(Path(text))) == spec  # survives Path(), as the tracker makes one
     with pytest.raises(ServoscopeError, match="unknown frame-source option"):
         parse_frame_source("a/*.tif#speed=3")
+    # A '#' in a video's own name is no option: a missing one is still "video not found".
+    assert not is_frame_source("take#2.mp4")
+    with pytest.raises(ServoscopeError, match=r"take#2\.mp4: video not found"):
+        probe_video("take#2.mp4")
 
 
 def test_mono_conversion_is_exact_at_the_ends():

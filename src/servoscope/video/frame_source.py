@@ -144,8 +144,8 @@ def parse_frame_source(path: str | Path) -> SourceSpec:
     """
     text = str(path)
     base, sep, query = text.partition(SOURCE_SEPARATOR)
-    if not sep or Path(text).exists():
-        return SourceSpec(text)
+    if not sep or "=" not in query or Path(text).exists():
+        return SourceSpec(text)  # a '#' in a file's own name ("take#2.mp4") is not an option
     options = dict(parse_qsl(query, keep_blank_values=True))
     unknown = set(options) - _OPTIONS
     if unknown:
@@ -186,7 +186,7 @@ def is_frame_source(path: str | Path) -> bool:
         return p.suffix.lower() in RAW_SUFFIXES + IMAGE_SUFFIXES
     if p.is_dir():
         return True
-    base = text.partition(SOURCE_SEPARATOR)[0]
+    base = parse_frame_source(text).path
     return base != text or _glob.has_magic(base) or Path(base).suffix.lower() in RAW_SUFFIXES
 
 
