@@ -10,6 +10,18 @@ Typical use::
     sel = select_order(fr, mode="complex")         # or order="auto" above
     step = analyse_step(t, angle_rad, t0_s=t0, step_size=0.5,
                         model=tf_fit.transfer_function)
+    fr.plot(); tf_fit.plot(); step.plot()          # matplotlib artists, for keeping
+
+Modules, each importing only those below it:
+
+* results: ``sine_result`` (SineFit), ``frequency_response``, ``tf_result``
+  (TransferFunctionFit, OrderSelection), ``step_result`` (StepAnalysis); ``plotting`` draws them;
+* sine dwells: ``sine`` (fit_sine) on ``_sine_window``, ``_sine_harmonics``, ``_sine_codec``, ``hac``;
+* transfer-function fit (lmfit's separation): the model ``_rational``, data and weights
+  ``_tf_data``, residuals and minimizer ``_tf_minimize``, ``_tf_metrics``, ``_tf_build``,
+  resampling ``_tf_resample``, one order's fit ``_fixed_order``; then ``order`` (select_order)
+  and, on top, ``tf_fit`` (fit_transfer_function, whose ``order="auto"`` calls select_order);
+* step tests: ``step`` (analyse_step).
 """
 
 from servoscope.sysid.frequency_response import FrequencyResponse
