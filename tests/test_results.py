@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from servoscope.results import html_table, import_pandas, jsonable, readonly
+from servoscope.results import html_rows, html_table, import_pandas, jsonable, readonly
 from servoscope.sysid import fit_sine
 
 
@@ -66,6 +66,15 @@ def test_html_table_has_a_row_per_key_in_order():
         "<table><caption>Thing</caption><tr><td>a</td><td>1</td></tr>"
         "<tr><td>b</td><td>None</td></tr><tr><td>c</td><td>[1, 2]</td></tr></table>"
     )
+
+
+def test_html_rows_has_a_header_and_a_row_per_item():
+    out = html_rows(("a", "b"), [[1, "x"], (2.5, None)], caption="Cap")
+    assert out == (
+        "<table><caption>Cap</caption><tr><th>a</th><th>b</th></tr>"
+        "<tr><td>1</td><td>x</td></tr><tr><td>2.5</td><td>None</td></tr></table>"
+    )
+    assert html_rows(["c"], []) == "<table><tr><th>c</th></tr></table>"
 
 
 def test_a_result_summary_round_trips_through_json():

@@ -11,14 +11,14 @@ and paths the same way.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["jsonable", "readonly", "import_pandas", "html_table"]
+__all__ = ["jsonable", "readonly", "import_pandas", "html_table", "html_rows"]
 
 
 def jsonable(value: Any) -> Any:
@@ -106,3 +106,26 @@ def html_table(summary: Mapping[str, Any], caption: str) -> str:
     """
     rows = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in summary.items())
     return f"<table><caption>{caption}</caption>{rows}</table>"
+
+
+def html_rows(columns: Iterable[str], rows: Iterable[Iterable[Any]], caption: str | None = None) -> str:
+    """An HTML table with a header row and one row per item of `rows`, for ``_repr_html_``.
+
+    Parameters
+    ----------
+    columns : iterable of str
+        Header cells.
+    rows : iterable of iterables
+        Cells, already formatted as the result wants them shown (written with ``str()``).
+    caption : str, optional
+        The table's caption.
+
+    Returns
+    -------
+    str
+        ``<table>[<caption>…</caption>]<tr><th>…</th></tr><tr><td>…</td></tr>…</table>``.
+    """
+    cap = "" if caption is None else f"<caption>{caption}</caption>"
+    head = "".join(f"<th>{c}</th>" for c in columns)
+    body = "".join("<tr>" + "".join(f"<td>{v}</td>" for v in row) + "</tr>" for row in rows)
+    return f"<table>{cap}<tr>{head}</tr>{body}</table>"

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import import_pandas, jsonable
+from servoscope.results import html_rows, import_pandas, jsonable
 from servoscope.sysid.plotting import new_axes, plot_gain, plot_phase
 from servoscope.sysid.sine_result import SineFit
 
@@ -379,11 +379,9 @@ class FrequencyResponse:
         return artists
 
     def _repr_html_(self) -> str:
-        head = "".join(f"<th>{c}</th>" for c in ("video", "f [Hz]", "gain", "gain [dB]", "phase [deg]", "fidelity"))
-        body = ""
-        for r in self._rows():
-            body += (
-                f"<tr><td>{r['video']}</td><td>{r['frequency_hz']:.4g}</td><td>{r['gain']:.4g}</td>"
-                f"<td>{r['gain_db']:.3f}</td><td>{r['phase_deg']:.2f}</td><td>{r['fidelity']:.4f}</td></tr>"
-            )
-        return f"<table><tr>{head}</tr>{body}</table>"
+        rows = (
+            [r["video"], f"{r['frequency_hz']:.4g}", f"{r['gain']:.4g}", f"{r['gain_db']:.3f}", f"{r['phase_deg']:.2f}",
+             f"{r['fidelity']:.4f}"]
+            for r in self._rows()
+        )
+        return html_rows(("video", "f [Hz]", "gain", "gain [dB]", "phase [deg]", "fidelity"), rows)

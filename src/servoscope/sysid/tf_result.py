@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import import_pandas, jsonable
+from servoscope.results import html_rows, import_pandas, jsonable
 from servoscope.sysid._rational import Structure, continuous_phase_rad, log_response
 from servoscope.sysid._tf_metrics import bandwidth_rad_s, j_rating
 from servoscope.sysid.frequency_response import FrequencyResponse
@@ -340,23 +340,17 @@ class TransferFunctionFit:
         return artists
 
     def _repr_html_(self) -> str:
-        head = "<tr><th>parameter</th><th>value</th><th>std. error</th><th>95 % interval</th></tr>"
-        body = ""
+        rows = []
         for name in self.param_names:
             lo, hi = self.ci95.get(name, (float("nan"), float("nan")))
-            body += (
-                f"<tr><td>{name}</td><td>{self.params[name]:.6g}</td><td>{self.stderr[name]:.3g}</td>"
-                f"<td>[{lo:.6g}, {hi:.6g}]</td></tr>"
-            )
+            rows.append([name, f"{self.params[name]:.6g}", f"{self.stderr[name]:.3g}", f"[{lo:.6g}, {hi:.6g}]"])
         fit = (
             f"order {self.order}, {self.mode} fit, J = {self.J:.3g} ({self.J_rating}), "
             f"AIC = {self.aic:.4g}, BIC = {self.bic:.4g}, {self.n_points} points"
         )
         warn = "".join(f"<li>{w}</li>" for w in self.warnings)
-        return (
-            f"<table><caption>TransferFunctionFit: {fit}</caption>{head}{body}</table>"
-            + (f"<ul>{warn}</ul>" if warn else "")
-        )
+        table = html_rows(("parameter", "value", "std. error", "95 % interval"), rows, f"TransferFunctionFit: {fit}")
+        return table + (f"<ul>{warn}</ul>" if warn else "")
 
 
 @dataclass(frozen=True)
@@ -428,8 +422,6 @@ class OrderSelection:
         return pd.DataFrame(rows, columns=list(ORDER_TABLE_KEYS))
 
     def _repr_html_(self) -> str:
-        head = "".join(f"<th>{k}</th>" for k in ORDER_TABLE_KEYS)
-
         def cell(v: Any) -> str:
             if isinstance(v, float):
                 return f"{v:.4g}"
@@ -437,11 +429,8 @@ class OrderSelection:
                 return f"({v[0]}, {v[1]})"
             return "✔" if v is True else ("" if v is False or v is None else str(v))
 
-        body = "".join(
-            "<tr>" + "".join(f"<td>{cell(r[k])}</td>" for k in ORDER_TABLE_KEYS) + "</tr>" for r in self.table
-        )
         cap = (
             f"Order selection ({self.mode}, {self.criterion}); high-frequency slope "
             f"{self.slope_db_per_decade:.1f} ± {self.slope_stderr_db_per_decade:.1f} dB/decade"
         )
-        return f"<table><caption>{cap}</caption><tr>{head}</tr>{body}</table>"
+        return html_rows(ORDER_TABLE_KEYS, ([cell(r[k]) for k in ORDER_TABLE_KEYS] for r in self.table), cap)
