@@ -21,16 +21,11 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 # Strongly connected components of the import graph (sorted module names).
 KNOWN_CYCLES: set[tuple[str, ...]] = {
     ('servoscope.campaign.manifest', 'servoscope.campaign.runner', 'servoscope.report.build'),
-    ('servoscope.markers.error_analysis', 'servoscope.markers.gpu', 'servoscope.markers.tracker'),
 }
 
 # (importing module, imported module, private name)
 KNOWN_PRIVATE: set[tuple[str, str, str]] = {
     ('servoscope.cli', 'servoscope.report.build', '_PARAM_LABELS'),
-    ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_chroma_window'),
-    ('servoscope.markers.gpu', 'servoscope.markers.kernels', '_classify_np'),
-    ('servoscope.markers.gpu', 'servoscope.markers.tracker', '_bt601'),
-    ('servoscope.markers.tracker', 'servoscope.markers.kernels', '_chroma_np'),
 }
 
 

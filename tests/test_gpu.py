@@ -43,7 +43,7 @@ def test_class_tables_are_the_cpu_classifier_bit_for_bit():
     idx = u * 256 + v
     for k in range(2):
         bits = (tables[k, idx >> 5] >> (idx & 31).astype(np.uint32)) & 1
-        want = K._classify_np(params[k], u.astype(float), v.astype(float))
+        want = K.classify_np(params[k], u.astype(float), v.astype(float))
         np.testing.assert_array_equal(bits.astype(bool), want)
         assert 0 < want.sum() < want.size  # a real class: neither empty nor everything
     # The red and the green marker's classes do not overlap.

@@ -30,7 +30,7 @@ def _frame(seed: int = 0, h: int = 96, w: int = 128) -> np.ndarray:
 
 
 def _params(i420: np.ndarray) -> np.ndarray:
-    from servoscope.markers.tracker import _bt601
+    from servoscope.markers.colour import ycbcr_bt601 as _bt601
 
     rows = []
     for rgb, (x0, y0, x1, y1), r in (((214, 39, 40), (60, 15, 115, 70), 11.0), ((44, 160, 44), (5, 25, 60, 80), 10.0)):
@@ -107,7 +107,7 @@ def test_luma_alpha_at_chroma_resolution_agrees_with_chroma():
     writer's 2×2 blocks and read at chroma's siting, luma's α agrees with chroma's to the
     8-bit rounding. A block or siting off by one pixel would not.
     """
-    from servoscope.markers.tracker import _bt601
+    from servoscope.markers.colour import ycbcr_bt601 as _bt601
 
     h, w = 64, 80
     cx, cy, r = 40.3, 31.6, 13.0
@@ -129,8 +129,8 @@ def test_luma_alpha_at_chroma_resolution_agrees_with_chroma():
     radius = r + 2.0
     sup = d2 <= radius**2
     aY = (Y.ravel()[sup] - yb) / (ym - yb)
-    sU = K._chroma_np(U, px[sup], py[sup], 0, 1)
-    sV = K._chroma_np(V, px[sup], py[sup], 0, 1)
+    sU = K.chroma_np(U, px[sup], py[sup], 0, 1)
+    sV = K.chroma_np(V, px[sup], py[sup], 0, 1)
     cu, cv = um - ub, vm - vb
     aC = (cu * (sU - ub) + cv * (sV - vb)) / (cu * cu + cv * cv)
     my = np.full(K.N_BINS, yb)

@@ -6,7 +6,10 @@ from .colour import ColourModel, parse_colour
 from .error_analysis import angle_error_analysis, plot_angle_error, worst_case_angle_error_rad
 from .moments import Moments, weighted_moments
 from .timebase import FrameTiming, frame_timing
-from .tracker import Track, TrackerSettings, angle_rad_from_centroids, track_video
+from ..angle.geometry import angle_rad_from_centroids
+from .settings import TrackerSettings
+from .track import Track
+from .tracker import track_video
 
 __all__ = [
     "Candidate",

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["AUTO", "parse_colour", "ColourModel", "hsv_of_rgb"]
+__all__ = ["AUTO", "parse_colour", "ColourModel", "hsv_of_rgb", "ycbcr_bt601"]
 
 AUTO = "auto"
 
@@ -52,6 +52,25 @@ def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, floa
         ) from None
     rgb = mcolors.to_rgb(mcolors.CSS4_COLORS[text])
     return tuple(float(c) * 255.0 for c in rgb)  # type: ignore[return-value]
+
+
+def ycbcr_bt601(rgb) -> np.ndarray:
+    """Limited-range BT.601 YCbCr of one RGB colour (0–255), as the writer and decoder use.
+
+    Parameters
+    ----------
+    rgb : sequence of 3 floats
+        Red, green, blue in 0–255.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Y in 16–235, Cb and Cr in 16–240 (128 neutral), unrounded.
+    """
+    r, g, b = (float(c) for c in rgb)
+    return np.array([16.0 + (65.481 * r + 128.553 * g + 24.966 * b) / 255.0,
+                     128.0 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255.0,
+                     128.0 + (112.0 * r - 93.786 * g - 18.214 * b) / 255.0])
 
 
 def hsv_of_rgb(rgb: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ the paper's figure with the footage's operating point.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,9 +25,18 @@ from ..errors import ServoscopeError
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-    from .tracker import Track
-
 __all__ = ["angle_error_analysis", "common_shake_px", "plot_angle_error", "rigid_motion_null", "worst_case_angle_error_rad"]
+
+
+class TrackLike(Protocol):
+    """What the analysis reads of a :class:`~servoscope.markers.track.Track` (which imports this module)."""
+
+    lead_xy_px: np.ndarray
+    trail_xy_px: np.ndarray
+    lead_sigma_px: np.ndarray
+    trail_sigma_px: np.ndarray
+    angle_rad: np.ndarray
+    valid: np.ndarray
 
 
 #: Frames the null channel's RMS needs to be a usable estimate (±16 % at 20 independent frames).
@@ -160,7 +169,7 @@ def common_shake_px(lead_xy_px: ArrayLike, trail_xy_px: ArrayLike, angle_rad: Ar
     return (math.sqrt(excess) if shaken and excess > 0 else 0.0), math.sqrt(var_sep)
 
 
-def angle_error_analysis(track: "Track", *, quantization_px: float = 1.0) -> dict:
+def angle_error_analysis(track: TrackLike, *, quantization_px: float = 1.0) -> dict:
     """Angle error budget of one track (plain types, for reports).
 
     Parameters

@@ -108,14 +108,14 @@ def class_tables(params: np.ndarray) -> np.ndarray:
     u, v = np.meshgrid(np.arange(256.0), np.arange(256.0), indexing="ij")
     rows = []
     for prm in np.atleast_2d(params):
-        member = K._classify_np(prm, u, v).ravel()  # index u·256 + v
+        member = K.classify_np(prm, u, v).ravel()  # index u·256 + v
         rows.append(np.packbits(member, bitorder="little").view("<u4"))
     return np.ascontiguousarray(np.array(rows, dtype=np.uint32))
 
 
 def chroma_windows(params: np.ndarray, height: int, width: int) -> np.ndarray:
     """Each marker's window in chroma samples, (markers, 4) int64: i0, i1, j0, j1 (half-open)."""
-    return np.array([K._chroma_window(prm, 0, 1, height // 2, width // 2) for prm in np.atleast_2d(params)],
+    return np.array([K.chroma_window(prm, 0, 1, height // 2, width // 2) for prm in np.atleast_2d(params)],
                     dtype=np.int64).reshape(-1, 4)
 
 
@@ -128,8 +128,8 @@ def class_moments_cpu(i420: np.ndarray, params: np.ndarray) -> np.ndarray:
         chroma = i420[f, h:].reshape(2, h // 2, w // 2)
         for k in range(params.shape[0]):
             prm = params[k]
-            i0, i1, j0, j1 = K._chroma_window(prm, 0, 1, h // 2, w // 2)
-            cls = K._classify_np(prm, chroma[0, j0:j1, i0:i1].astype(np.float64),
+            i0, i1, j0, j1 = K.chroma_window(prm, 0, 1, h // 2, w // 2)
+            cls = K.classify_np(prm, chroma[0, j0:j1, i0:i1].astype(np.float64),
                                  chroma[1, j0:j1, i0:i1].astype(np.float64))
             jj, ii = np.nonzero(cls)
             out[f, k, 0] = 4.0 * cls.sum()
@@ -355,12 +355,11 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
 
 def bench_params(settings, width: int = 1 << 20, height: int = 1 << 20) -> np.ndarray:
     """Kernel rows for the settings' lead and trail seed colours over the whole frame (±15° hue)."""
-    from .colour import parse_colour
-    from .tracker import _bt601
+    from .colour import parse_colour, ycbcr_bt601
 
     rows = []
     for spec in (settings.lead, settings.trail):
-        y, u, v = _bt601(parse_colour(spec))
+        y, u, v = ycbcr_bt601(parse_colour(spec))
         sat = math.hypot(u - 128.0, v - 128.0)
         prm = np.zeros(K.NP)
         prm[K.P.X0:K.P.Y1 + 1] = (0, 0, width, height)

@@ -60,7 +60,7 @@ from numba import njit
 __all__ = [
     "P", "Q", "NP", "NQ", "LED_NP", "LED_NQ", "N_BINS",
     "track_frame_numpy", "track_frame_numba", "track_frame", "led_level_numpy", "led_level_numba",
-    "ENGINES", "LED_ENGINES",
+    "ENGINES", "LED_ENGINES", "chroma_window", "chroma_np", "classify_np",
 ]
 
 #: Angular bins of the background ring.
@@ -179,14 +179,15 @@ def _led_centre(out, led):
     return cx, cy
 
 
-def _chroma_window(prm, row_off, row_step, hc, wc):
+def chroma_window(prm, row_off, row_step, hc, wc):
+    """A marker window (luma rows/columns in ``prm``) as chroma-plane bounds (i0, i1, j0, j1)."""
     x0, y0, x1, y1 = int(prm[0]), int(prm[1]), int(prm[2]), int(prm[3])
     r0 = row_off + row_step * y0
     r1 = row_off + row_step * (y1 - 1)
     return max(0, x0 // 2), min(wc, (x1 + 1) // 2), max(0, r0 // 2), min(hc, r1 // 2 + 1)
 
 
-_chroma_window_nb = njit(cache=True, nogil=True, fastmath=_FAST, inline="always")(_chroma_window)
+_chroma_window_nb = njit(cache=True, nogil=True, fastmath=_FAST, inline="always")(chroma_window)
 
 
 # ---------------------------------------------------------------------------
@@ -210,7 +211,7 @@ def _chroma_neighbours_np(xs, ys, row_off, row_step, hc, wc):
             fx, fy)
 
 
-def _chroma_np(plane, xs, ys, row_off, row_step):
+def chroma_np(plane, xs, ys, row_off, row_step):
     """Bilinear chroma at luma pixels (xs, ys); chroma sample (i, j) sits at luma (2i+.5, 2j+.5)."""
     ia, ib, ja, jb, fx, fy = _chroma_neighbours_np(xs, ys, row_off, row_step, *plane.shape)
     p = plane
@@ -219,7 +220,8 @@ def _chroma_np(plane, xs, ys, row_off, row_step):
     return top * (1.0 - fy) + bot * fy
 
 
-def _classify_np(prm, uv, vv):
+def classify_np(prm, uv, vv):
+    """Chroma samples of the marker's class: saturated enough and within its hue cone."""
     u = uv - 128.0
     v = vv - 128.0
     sat = np.sqrt(u * u + v * v)
@@ -233,9 +235,9 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
     h, w = Y.shape
     hc, wc = U.shape
     x0, y0 = prm[P.X0], prm[P.Y0]
-    i0, i1, j0, j1 = _chroma_window(prm, row_off, row_step, hc, wc)
+    i0, i1, j0, j1 = chroma_window(prm, row_off, row_step, hc, wc)
     jj, ii = np.mgrid[j0:j1, i0:i1]
-    cls = _classify_np(prm, U[j0:j1, i0:i1].astype(np.float64), V[j0:j1, i0:i1].astype(np.float64))
+    cls = classify_np(prm, U[j0:j1, i0:i1].astype(np.float64), V[j0:j1, i0:i1].astype(np.float64))
     wq = 4.0 / row_step
     qx = (2.0 * ii[cls] + 0.5) - x0
     qy = ((2.0 * jj[cls] + 0.5 - row_off) / row_step) - y0
@@ -275,9 +277,9 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
         d2 = _support_d2_np(prm, dx, dym, radius)
         pY = Y[ay0:ay1, ax0:ax1].ravel().astype(np.float64)
         ring = (d2 >= (radius + 1.0) ** 2) & (d2 <= outer * outer)
-        rU = _chroma_np(U, px[ring], py[ring], row_off, row_step)
-        rV = _chroma_np(V, px[ring], py[ring], row_off, row_step)
-        keep = ~_classify_np(prm, rU, rV)
+        rU = chroma_np(U, px[ring], py[ring], row_off, row_step)
+        rV = chroma_np(V, px[ring], py[ring], row_off, row_step)
+        keep = ~classify_np(prm, rU, rV)
         rY = pY[ring][keep]
         rU, rV = rU[keep], rV[keep]
         t = (_atan2_np(dym[ring][keep], dx[ring][keep]) + math.pi) * scale
@@ -287,9 +289,9 @@ def _marker_np(Y, U, V, row_off, row_step, prm, out):
         sup = d2 <= radius * radius
         sdx, sdy = dx[sup], dy[sup]
         sY = pY[sup]
-        sU = _chroma_np(U, px[sup], py[sup], row_off, row_step)
-        sV = _chroma_np(V, px[sup], py[sup], row_off, row_step)
-        flag = _classify_np(prm, sU, sV).astype(np.float64)
+        sU = chroma_np(U, px[sup], py[sup], row_off, row_step)
+        sV = chroma_np(V, px[sup], py[sup], row_off, row_step)
+        flag = classify_np(prm, sU, sV).astype(np.float64)
         have_bg = ring_n >= 8.0
         if have_bg:
             my, mu, mv = _fill_bins_np(cnt, np.bincount(rbin, rY, N_BINS), np.bincount(rbin, rU, N_BINS),
@@ -485,7 +487,7 @@ def _chroma_neighbours(x, y, row_off, row_step, hc, wc):
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _chroma_uv_at(U, V, x, y, row_off, row_step):
-    """Bilinear Cb and Cr at luma pixel (x, y) (integers), as :func:`_chroma_np`."""
+    """Bilinear Cb and Cr at luma pixel (x, y) (integers), as :func:`chroma_np`."""
     hc, wc = U.shape
     ia, ib, ja, jb, fx, fy = _chroma_neighbours(x, y, row_off, row_step, hc, wc)
     top = float(U[ja, ia]) * (1.0 - fx) + float(U[ja, ib]) * fx

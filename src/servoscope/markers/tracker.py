@@ -24,331 +24,30 @@ advance.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import cv2
 import numpy as np
 
-from ..camera.model import CameraModel
-from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from ..video.reader import VideoInfo, iter_frames, iter_yuv_frames, probe_video, thread_budget
 from .centroid import SoftCentroid, distortion_centroid_offset, soft_centroid
-from .colour import AUTO, ColourModel, hsv_of_rgb, parse_colour
+from .colour import AUTO, ColourModel, parse_colour, ycbcr_bt601
 from .moments import Moments, weighted_moments
 from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s, led_switch_time
 from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
 from .selection import auto_colour_models, choose_markers, marker_candidates
 from .timebase import frame_timing
 from . import kernels as K
+from ..angle.geometry import angle_rad_from_centroids
+from .settings import BACKENDS, ENGINES, TrackerSettings, resolve_engine
+from .track import Track
 
-__all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids"]
+__all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids", "resolve_engine", "ENGINES", "BACKENDS"]
 
 _KERNEL3 = np.ones((3, 3), np.uint8)
-
-
-def angle_rad_from_centroids(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray) -> np.ndarray:
-    """Angle of the line from the trailing to the leading marker.
-
-    θ = atan2(y_trail − y_lead, x_lead − x_trail) in image coordinates (y down),
-    so counter-clockwise as seen in the image is positive.
-    """
-    lead = np.asarray(lead_xy_px, dtype=np.float64).reshape(-1, 2)
-    trail = np.asarray(trail_xy_px, dtype=np.float64).reshape(-1, 2)
-    return np.arctan2(trail[:, 1] - lead[:, 1], lead[:, 0] - trail[:, 0])
-
-
-@dataclass(frozen=True)
-class TrackerSettings:
-    """How to track one video.
-
-    Attributes
-    ----------
-    lead, trail : str
-        Marker colours: ``"#rrggbb"``, a CSS name, or ``"auto"``.
-    led : str or None
-        LED colour; None when the footage has no LED.
-    camera : CameraModel or None
-        When given, centroids are undistorted before angles are computed.
-    exposure_s : float or None
-        Exposure (shutter) time, for the LED's sub-frame switch time; None
-        (unknown) assumes nothing about it: a switch that lit no frame partly
-        is then anywhere between two frame times (see
-        :mod:`servoscope.markers.led_timing`). Must be > 0 and no longer than
-        the frame interval.
-    search_radius_px : float
-        Half-size of the search window beyond the marker's own extent (px).
-    support_margin_px : float
-        Background margin around the sticker over which its soft moments are
-        taken (px); the sticker's edge blur must fit inside it.
-    shape_tolerance : float
-        Largest relative loss of a marker's soft area from the marker's
-        reference before the frame is flagged as partly hidden (0.03 = 3 %);
-        a gain of 2.5×, or a change of a second-moment axis of 2× this
-        flags it as merged or misshapen.
-    deinterlace : {None, "fields", "fields-bff"}
-        Split each interlaced frame into its two fields, each with its own
-        time (double rate): ``"fields"`` top field first, ``"fields-bff"``
-        bottom field first. Centroids stay in frame-row coordinates.
-    centroid : {"local", "projected"}
-        Soft-membership estimator. ``"local"``: each pixel unmixed between
-        the marker colour and its nearest background pixel, membership
-        clipped to [0, 1], over the blob dilated by 3 px (robust on every
-        footage measured). ``"projected"`` (experimental):
-        :func:`~servoscope.markers.centroid.soft_centroid`, signed membership
-        with the background's variation projected out, over a tapered disk;
-        3× more accurate on uncompressed footage of the reference scene but
-        not yet robust to H.264 chroma bleed and small stickers. Both are
-        estimators of the RGB path (``engine="reference-rgb"``); the YUV
-        engines have their own (see :mod:`servoscope.markers.kernels`).
-    engine : {"auto", "numba", "numpy", "reference-rgb"}
-        ``"numba"`` (what ``"auto"`` picks): the fused kernel on the
-        decoder's YUV planes, classifying by chroma and unmixing with
-        full-resolution luma, decoding on a second thread; the most accurate
-        and the fastest. ``"numpy"``: the same maths in plain numpy (slow; a
-        reference). ``"reference-rgb"``: the previous path (every frame
-        converted to RGB, HSV masks, ``centroid`` estimator), for comparison.
-        With ``centroid="projected"``, ``"auto"`` picks ``"reference-rgb"``.
-    backend : {"auto", "cpu", "cuda"}
-        Where the kernel runs. ``"auto"`` and ``"cpu"``: this machine's CPU.
-        ``"cuda"``: requires a CUDA GPU (or ``NUMBA_ENABLE_CUDASIM=1``) and
-        fails clearly without one; the paper's batch reduction is
-        :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
-        windowed sub-pixel kernel itself still runs on the CPU.
-    lead_near, trail_near : (float, float) or None
-        Pin a marker by position (px in the first frame), as a user clicks a
-        point: the marker is the blob of its colour there (an error when
-        there is none). None (the default): the best-scoring pair of blobs
-        (see :mod:`servoscope.markers.selection`).
-    readout_s : float
-        Rolling-shutter readout time, seconds (0, the default: a global
-        shutter). Row y of a frame is taken as exposed around
-        ``frame_time + readout_s·y/height`` (y in the recorded image): the
-        angle's sample time and the LED's switch time are corrected for the
-        rows the stickers and the LED are on. Must be shorter than the frame
-        (or field) interval.
-    timestamp : {"middle", "start", "end"}
-        Which point of its exposure a frame's timestamp marks ("middle", the
-        default, as the digital twin and most containers' players assume).
-        With a known exposure, angles and t0 are dated at the exposures'
-        middles; the phases and the dead time do not depend on it (the LED
-        and the markers share each frame's exposure).
-    """
-
-    lead: str = LEAD_COLOUR
-    trail: str = TRAIL_COLOUR
-    led: str | None = LED_COLOUR
-    camera: CameraModel | None = None
-    exposure_s: float | None = None
-    search_radius_px: float = 24.0
-    support_margin_px: float = 2.0
-    shape_tolerance: float = 0.03
-    deinterlace: str | None = None
-    centroid: str = "local"
-    engine: str = "auto"
-    backend: str = "auto"
-    readout_s: float = 0.0
-    timestamp: str = "middle"
-    lead_near: tuple[float, float] | None = None
-    trail_near: tuple[float, float] | None = None
-
-
-@dataclass
-class Track:
-    """Per-frame measurements of one video.
-
-    Arrays have one entry per decoded frame. Coordinates are pixels in the
-    ideal (undistorted) image when a camera model was given, else in the
-    recorded image.
-
-    Attributes
-    ----------
-    video : str
-    frame : ndarray of int
-    time_s : ndarray
-        Presentation times from the video's PTS.
-    lead_xy_px, trail_xy_px : ndarray, shape (n, 2)
-        Centroids; NaN where not found.
-    lead_area_px, trail_area_px : ndarray
-        Soft areas (m00).
-    angle_rad : ndarray
-        θ = atan2(y_trail − y_lead, x_lead − x_trail), unwrapped; NaN where invalid.
-    valid : ndarray of bool
-    reason : list of str
-        Why a frame is invalid ("" when valid).
-    led_level : ndarray
-        LED brightness normalised to 1 lit, 0 off; NaN without an LED.
-    t0_s : float or None
-        LED switch-off time (the input's start), sub-frame.
-    t0_uncertainty_s : float or None
-    warnings : list of str
-    snapshot_rgb : ndarray or None
-        One frame, for drawing the detected centroids on it.
-    snapshot_index : int
-    lead_sigma_px, trail_sigma_px : ndarray
-        Standard uncertainty of each centroid coordinate from pixel noise
-        (px); NaN where not found.
-    angle_sigma_rad : ndarray
-        Standard uncertainty of the angle propagated from both centroids'
-        (rad); NaN where invalid.
-    angle_time_s : ndarray
-        When the angle was sampled: ``time_s`` for a global shutter; with a
-        rolling shutter, ``time_s + readout_s·y_eff/height``, y_eff the
-        markers' rows weighted by their share of the angle's motion (see
-        :func:`_angle_row_weights`). Fit the angle against this.
-    readout_s : float
-        Rolling-shutter readout time the track was corrected for (0: none).
-    t0_earliest_s, t0_latest_s : float or None
-        The interval the switch can lie in (the unexposed gap when no frame
-        was partly lit; see :class:`~servoscope.markers.led_timing.SwitchTime`).
-    led_partial_frames : int or None
-        Partly lit frames at the switch (0, 1 or 2): evidence of the
-        exposure, pooled over a campaign by
-        :func:`servoscope.camera.exposure.estimate_exposure`.
-    intra : ndarray of bool or None
-        Frames the codec coded on their own (I-frames; every frame of
-        uncompressed video); None when unknown. ``fit_sine`` checks the
-        other frames' sine against theirs (the codec check).
-    """
-
-    video: str
-    frame: np.ndarray
-    time_s: np.ndarray
-    lead_xy_px: np.ndarray
-    trail_xy_px: np.ndarray
-    lead_area_px: np.ndarray
-    trail_area_px: np.ndarray
-    angle_rad: np.ndarray
-    valid: np.ndarray
-    reason: list[str]
-    led_level: np.ndarray
-    t0_s: float | None = None
-    t0_uncertainty_s: float | None = None
-    warnings: list[str] = field(default_factory=list)
-    snapshot_rgb: np.ndarray | None = None
-    snapshot_index: int = 0
-    lead_sigma_px: np.ndarray | None = None
-    trail_sigma_px: np.ndarray | None = None
-    angle_sigma_rad: np.ndarray | None = None
-    angle_time_s: np.ndarray | None = None
-    readout_s: float = 0.0
-    intra: np.ndarray | None = None
-    t0_earliest_s: float | None = None
-    t0_latest_s: float | None = None
-    led_partial_frames: int | None = None
-
-    def __post_init__(self) -> None:
-        # Tracks built by older code (or by hand) lack the uncertainty columns.
-        n = int(np.asarray(self.frame).size)
-        for name in ("lead_sigma_px", "trail_sigma_px", "angle_sigma_rad"):
-            if getattr(self, name) is None:
-                setattr(self, name, np.full(n, np.nan))
-        # ...and the angle's sample times: a global shutter's are the frame times.
-        if self.angle_time_s is None:
-            self.angle_time_s = np.array(self.time_s, dtype=np.float64)
-
-    @property
-    def n_frames(self) -> int:
-        """Number of decoded frames (or fields)."""
-        return int(self.frame.size)
-
-    @property
-    def n_valid(self) -> int:
-        """Number of frames with both markers measured."""
-        return int(np.count_nonzero(self.valid))
-
-    @property
-    def separation_px(self) -> np.ndarray:
-        """Distance between the two centroids per frame (px); NaN where invalid."""
-        d = np.hypot(*(self.lead_xy_px - self.trail_xy_px).T)
-        return np.where(self.valid, d, np.nan)
-
-    def summary(self) -> dict:
-        """Plain-typed summary: counts, sticker separation, noise, LED time.
-
-        Keys ``video, frames, valid_frames, t0_s, t0_uncertainty_s, warnings``
-        plus ``valid_fraction``, ``mean_separation_px``,
-        ``centroid_sigma_px`` (median per-frame centroid uncertainty),
-        ``angle_noise_rad`` (the statistical angle error from pixel noise,
-        see :func:`servoscope.markers.angle_error_analysis`) and
-        ``angle_noise_measured_rad`` (the tracking error measured on the
-        markers' rigid-motion null channel, codec errors included; None
-        with fewer than 20 valid frames; from the separation's spread when
-        the camera shakes), ``camera_shake_px`` (the shake seen, RMS px).
-        """
-        from .error_analysis import angle_error_analysis
-
-        analysis = angle_error_analysis(self) if self.n_valid else {}
-        return {
-            "video": self.video,
-            "frames": self.n_frames,
-            "valid_frames": self.n_valid,
-            "valid_fraction": (self.n_valid / self.n_frames) if self.n_frames else 0.0,
-            "mean_separation_px": analysis.get("separation_px"),
-            "centroid_sigma_px": analysis.get("centroid_sigma_px"),
-            "angle_noise_rad": analysis.get("angle_sigma_rad"),
-            "angle_noise_measured_rad": analysis.get("measured_noise_rad"),
-            "camera_shake_px": analysis.get("camera_shake_px"),
-            "t0_s": self.t0_s,
-            "t0_uncertainty_s": self.t0_uncertainty_s,
-            # Where t0 can lie, and how many frames at the switch were partly lit (the
-            # exposure's evidence: none when the switch fell between two exposures).
-            "t0_interval_s": None if self.t0_earliest_s is None else [self.t0_earliest_s, self.t0_latest_s],
-            "led_partial_frames": self.led_partial_frames,
-            "warnings": list(self.warnings),
-        }
-
-    def columns(self) -> dict[str, np.ndarray]:
-        """The per-frame table as a dict of columns (pandas-free)."""
-        return {
-            "frame": self.frame,
-            "time_s": self.time_s,
-            "angle_rad": self.angle_rad,
-            "valid": self.valid.astype(np.int64),
-            "lead_x_px": self.lead_xy_px[:, 0],
-            "lead_y_px": self.lead_xy_px[:, 1],
-            "trail_x_px": self.trail_xy_px[:, 0],
-            "trail_y_px": self.trail_xy_px[:, 1],
-            "lead_area_px": self.lead_area_px,
-            "trail_area_px": self.trail_area_px,
-            "lead_sigma_px": self.lead_sigma_px,
-            "trail_sigma_px": self.trail_sigma_px,
-            "angle_sigma_rad": self.angle_sigma_rad,
-            "led_level": self.led_level,
-            "angle_time_s": self.angle_time_s,
-            **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
-        }
-
-    def to_pandas(self):
-        """The per-frame table as a pandas DataFrame (pandas is optional)."""
-        try:
-            import pandas as pd
-        except ImportError as exc:  # pragma: no cover - depends on the environment
-            raise ImportError("Track.to_pandas() needs pandas: pip install pandas") from exc
-        df = pd.DataFrame(self.columns())
-        df["reason"] = self.reason
-        return df
-
-    def to_csv(self, path: str | Path) -> None:
-        """Write the per-frame table (``frame,time_s,angle_rad,valid,…``)."""
-        cols = self.columns()
-        names = list(cols) + ["reason"]
-        lines = [",".join(names)]
-        for i in range(self.n_frames):
-            row = []
-            for name in names[:-1]:
-                value = cols[name][i]
-                if name in ("frame", "valid", "intra"):
-                    row.append(str(int(value)))
-                elif np.isnan(value):
-                    row.append("")
-                else:
-                    row.append(repr(float(value)))
-            row.append(self.reason[i].replace(",", ";"))
-            lines.append(",".join(row))
-        Path(path).write_text("\n".join(lines) + "\n")
 
 
 @dataclass
@@ -959,21 +658,6 @@ def _led_row_px(rgb: np.ndarray, led_spec, info: VideoInfo) -> float | None:
     return float(info.sensor_rows(cents[best]))
 
 
-ENGINES = ("auto", "numba", "numpy", "reference-rgb")
-BACKENDS = ("auto", "cpu", "cuda")
-
-
-def resolve_engine(settings: TrackerSettings) -> str:
-    """The engine ``settings`` asks for, "auto" resolved; raises on unknown names."""
-    if settings.engine not in ENGINES:
-        raise ServoscopeError(f"engine: {settings.engine!r} is not one of {', '.join(ENGINES)}")
-    if settings.backend not in BACKENDS:
-        raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
-    if settings.engine == "auto":
-        return "reference-rgb" if settings.centroid == "projected" else "numba"
-    return settings.engine
-
-
 def _local_unmixing_centroid(rgb: np.ndarray, window: tuple[int, int, int, int],
                              component: np.ndarray) -> SoftCentroid | None:
     """Soft centroid by per-pixel unmixing against the nearest background pixel.
@@ -1247,14 +931,6 @@ AGREE = 0.15
 ALPHA_RANGE = (0.0, 1.0)
 
 
-def _bt601(rgb) -> np.ndarray:
-    """Limited-range BT.601 YCbCr of an RGB colour (0–255), as the writer/decoder use."""
-    r, g, b = (float(c) for c in rgb)
-    return np.array([16.0 + (65.481 * r + 128.553 * g + 24.966 * b) / 255.0,
-                     128.0 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255.0,
-                     128.0 + (112.0 * r - 93.786 * g - 18.214 * b) / 255.0])
-
-
 def _chroma_angle(uv: np.ndarray) -> np.ndarray:
     return np.arctan2(uv[..., 1] - 128.0, uv[..., 0] - 128.0)
 
@@ -1363,8 +1039,8 @@ def _learn_yuv(tracker: _MarkerTracker, frame, m: Moments, margin_px: float) -> 
         core = (xx - m.x_px) ** 2 + (yy - m.y_px) ** 2 <= r_core**2
     xs, ys = xx[core].astype(np.float64), yy[core].astype(np.float64)
     Y = frame.y[y0:y1, x0:x1][core].astype(np.float64)
-    U = K._chroma_np(frame.u, xs, ys, frame.row_offset, frame.row_step)
-    V = K._chroma_np(frame.v, xs, ys, frame.row_offset, frame.row_step)
+    U = K.chroma_np(frame.u, xs, ys, frame.row_offset, frame.row_step)
+    V = K.chroma_np(frame.v, xs, ys, frame.row_offset, frame.row_step)
     ym, um, vm = float(np.median(Y)), float(np.median(U)), float(np.median(V))
     sat = math.hypot(um - 128.0, vm - 128.0)
     ang = np.arctan2(V - 128.0, U - 128.0)
@@ -1402,7 +1078,7 @@ def _separate_hues(states: list[_YuvState], led_rgb) -> None:
     dirs = [math.atan2(st.prm[K.P.DIR_V], st.prm[K.P.DIR_U]) for st in states]
     others = list(dirs)
     if led_rgb is not None:
-        y, u, v = _bt601(led_rgb)
+        y, u, v = ycbcr_bt601(led_rgb)
         others.append(math.atan2(v - 128.0, u - 128.0))
     for i, st in enumerate(states):
         gaps = [abs(math.remainder(dirs[i] - o, 2 * math.pi)) for j, o in enumerate(others) if j != i]

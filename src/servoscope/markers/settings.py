@@ -1,0 +1,121 @@
+"""How to track one video: :class:`TrackerSettings`, and the engine it resolves to."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..camera.model import CameraModel
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+from ..errors import ServoscopeError
+
+__all__ = ["BACKENDS", "ENGINES", "TrackerSettings", "resolve_engine"]
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """How to track one video.
+
+    Attributes
+    ----------
+    lead, trail : str
+        Marker colours: ``"#rrggbb"``, a CSS name, or ``"auto"``.
+    led : str or None
+        LED colour; None when the footage has no LED.
+    camera : CameraModel or None
+        When given, centroids are undistorted before angles are computed.
+    exposure_s : float or None
+        Exposure (shutter) time, for the LED's sub-frame switch time; None
+        (unknown) assumes nothing about it: a switch that lit no frame partly
+        is then anywhere between two frame times (see
+        :mod:`servoscope.markers.led_timing`). Must be > 0 and no longer than
+        the frame interval.
+    search_radius_px : float
+        Half-size of the search window beyond the marker's own extent (px).
+    support_margin_px : float
+        Background margin around the sticker over which its soft moments are
+        taken (px); the sticker's edge blur must fit inside it.
+    shape_tolerance : float
+        Largest relative loss of a marker's soft area from the marker's
+        reference before the frame is flagged as partly hidden (0.03 = 3 %);
+        a gain of 2.5×, or a change of a second-moment axis of 2× this
+        flags it as merged or misshapen.
+    deinterlace : {None, "fields", "fields-bff"}
+        Split each interlaced frame into its two fields, each with its own
+        time (double rate): ``"fields"`` top field first, ``"fields-bff"``
+        bottom field first. Centroids stay in frame-row coordinates.
+    centroid : {"local", "projected"}
+        Soft-membership estimator. ``"local"``: each pixel unmixed between
+        the marker colour and its nearest background pixel, membership
+        clipped to [0, 1], over the blob dilated by 3 px (robust on every
+        footage measured). ``"projected"`` (experimental):
+        :func:`~servoscope.markers.centroid.soft_centroid`, signed membership
+        with the background's variation projected out, over a tapered disk;
+        3× more accurate on uncompressed footage of the reference scene but
+        not yet robust to H.264 chroma bleed and small stickers. Both are
+        estimators of the RGB path (``engine="reference-rgb"``); the YUV
+        engines have their own (see :mod:`servoscope.markers.kernels`).
+    engine : {"auto", "numba", "numpy", "reference-rgb"}
+        ``"numba"`` (what ``"auto"`` picks): the fused kernel on the
+        decoder's YUV planes, classifying by chroma and unmixing with
+        full-resolution luma, decoding on a second thread; the most accurate
+        and the fastest. ``"numpy"``: the same maths in plain numpy (slow; a
+        reference). ``"reference-rgb"``: the previous path (every frame
+        converted to RGB, HSV masks, ``centroid`` estimator), for comparison.
+        With ``centroid="projected"``, ``"auto"`` picks ``"reference-rgb"``.
+    backend : {"auto", "cpu", "cuda"}
+        Where the kernel runs. ``"auto"`` and ``"cpu"``: this machine's CPU.
+        ``"cuda"``: requires a CUDA GPU (or ``NUMBA_ENABLE_CUDASIM=1``) and
+        fails clearly without one; the paper's batch reduction is
+        :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
+        windowed sub-pixel kernel itself still runs on the CPU.
+    lead_near, trail_near : (float, float) or None
+        Pin a marker by position (px in the first frame), as a user clicks a
+        point: the marker is the blob of its colour there (an error when
+        there is none). None (the default): the best-scoring pair of blobs
+        (see :mod:`servoscope.markers.selection`).
+    readout_s : float
+        Rolling-shutter readout time, seconds (0, the default: a global
+        shutter). Row y of a frame is taken as exposed around
+        ``frame_time + readout_s·y/height`` (y in the recorded image): the
+        angle's sample time and the LED's switch time are corrected for the
+        rows the stickers and the LED are on. Must be shorter than the frame
+        (or field) interval.
+    timestamp : {"middle", "start", "end"}
+        Which point of its exposure a frame's timestamp marks ("middle", the
+        default, as the digital twin and most containers' players assume).
+        With a known exposure, angles and t0 are dated at the exposures'
+        middles; the phases and the dead time do not depend on it (the LED
+        and the markers share each frame's exposure).
+    """
+
+    lead: str = LEAD_COLOUR
+    trail: str = TRAIL_COLOUR
+    led: str | None = LED_COLOUR
+    camera: CameraModel | None = None
+    exposure_s: float | None = None
+    search_radius_px: float = 24.0
+    support_margin_px: float = 2.0
+    shape_tolerance: float = 0.03
+    deinterlace: str | None = None
+    centroid: str = "local"
+    engine: str = "auto"
+    backend: str = "auto"
+    readout_s: float = 0.0
+    timestamp: str = "middle"
+    lead_near: tuple[float, float] | None = None
+    trail_near: tuple[float, float] | None = None
+
+
+ENGINES = ("auto", "numba", "numpy", "reference-rgb")
+BACKENDS = ("auto", "cpu", "cuda")
+
+
+def resolve_engine(settings: TrackerSettings) -> str:
+    """The engine ``settings`` asks for, "auto" resolved; raises on unknown names."""
+    if settings.engine not in ENGINES:
+        raise ServoscopeError(f"engine: {settings.engine!r} is not one of {', '.join(ENGINES)}")
+    if settings.backend not in BACKENDS:
+        raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
+    if settings.engine == "auto":
+        return "reference-rgb" if settings.centroid == "projected" else "numba"
+    return settings.engine

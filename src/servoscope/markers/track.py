@@ -1,0 +1,206 @@
+"""A tracked video's per-frame measurements (:class:`Track`): summary, tables, CSV."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .error_analysis import angle_error_analysis
+
+__all__ = ["Track"]
+
+
+@dataclass
+class Track:
+    """Per-frame measurements of one video.
+
+    Arrays have one entry per decoded frame. Coordinates are pixels in the
+    ideal (undistorted) image when a camera model was given, else in the
+    recorded image.
+
+    Attributes
+    ----------
+    video : str
+    frame : ndarray of int
+    time_s : ndarray
+        Presentation times from the video's PTS.
+    lead_xy_px, trail_xy_px : ndarray, shape (n, 2)
+        Centroids; NaN where not found.
+    lead_area_px, trail_area_px : ndarray
+        Soft areas (m00).
+    angle_rad : ndarray
+        θ = atan2(y_trail − y_lead, x_lead − x_trail), unwrapped; NaN where invalid.
+    valid : ndarray of bool
+    reason : list of str
+        Why a frame is invalid ("" when valid).
+    led_level : ndarray
+        LED brightness normalised to 1 lit, 0 off; NaN without an LED.
+    t0_s : float or None
+        LED switch-off time (the input's start), sub-frame.
+    t0_uncertainty_s : float or None
+    warnings : list of str
+    snapshot_rgb : ndarray or None
+        One frame, for drawing the detected centroids on it.
+    snapshot_index : int
+    lead_sigma_px, trail_sigma_px : ndarray
+        Standard uncertainty of each centroid coordinate from pixel noise
+        (px); NaN where not found.
+    angle_sigma_rad : ndarray
+        Standard uncertainty of the angle propagated from both centroids'
+        (rad); NaN where invalid.
+    angle_time_s : ndarray
+        When the angle was sampled: ``time_s`` for a global shutter; with a
+        rolling shutter, ``time_s + readout_s·y_eff/height``, y_eff the
+        markers' rows weighted by their share of the angle's motion (see
+        :func:`_angle_row_weights`). Fit the angle against this.
+    readout_s : float
+        Rolling-shutter readout time the track was corrected for (0: none).
+    t0_earliest_s, t0_latest_s : float or None
+        The interval the switch can lie in (the unexposed gap when no frame
+        was partly lit; see :class:`~servoscope.markers.led_timing.SwitchTime`).
+    led_partial_frames : int or None
+        Partly lit frames at the switch (0, 1 or 2): evidence of the
+        exposure, pooled over a campaign by
+        :func:`servoscope.camera.exposure.estimate_exposure`.
+    intra : ndarray of bool or None
+        Frames the codec coded on their own (I-frames; every frame of
+        uncompressed video); None when unknown. ``fit_sine`` checks the
+        other frames' sine against theirs (the codec check).
+    """
+
+    video: str
+    frame: np.ndarray
+    time_s: np.ndarray
+    lead_xy_px: np.ndarray
+    trail_xy_px: np.ndarray
+    lead_area_px: np.ndarray
+    trail_area_px: np.ndarray
+    angle_rad: np.ndarray
+    valid: np.ndarray
+    reason: list[str]
+    led_level: np.ndarray
+    t0_s: float | None = None
+    t0_uncertainty_s: float | None = None
+    warnings: list[str] = field(default_factory=list)
+    snapshot_rgb: np.ndarray | None = None
+    snapshot_index: int = 0
+    lead_sigma_px: np.ndarray | None = None
+    trail_sigma_px: np.ndarray | None = None
+    angle_sigma_rad: np.ndarray | None = None
+    angle_time_s: np.ndarray | None = None
+    readout_s: float = 0.0
+    intra: np.ndarray | None = None
+    t0_earliest_s: float | None = None
+    t0_latest_s: float | None = None
+    led_partial_frames: int | None = None
+
+    def __post_init__(self) -> None:
+        # Tracks built by older code (or by hand) lack the uncertainty columns.
+        n = int(np.asarray(self.frame).size)
+        for name in ("lead_sigma_px", "trail_sigma_px", "angle_sigma_rad"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(n, np.nan))
+        # ...and the angle's sample times: a global shutter's are the frame times.
+        if self.angle_time_s is None:
+            self.angle_time_s = np.array(self.time_s, dtype=np.float64)
+
+    @property
+    def n_frames(self) -> int:
+        """Number of decoded frames (or fields)."""
+        return int(self.frame.size)
+
+    @property
+    def n_valid(self) -> int:
+        """Number of frames with both markers measured."""
+        return int(np.count_nonzero(self.valid))
+
+    @property
+    def separation_px(self) -> np.ndarray:
+        """Distance between the two centroids per frame (px); NaN where invalid."""
+        d = np.hypot(*(self.lead_xy_px - self.trail_xy_px).T)
+        return np.where(self.valid, d, np.nan)
+
+    def summary(self) -> dict:
+        """Plain-typed summary: counts, sticker separation, noise, LED time.
+
+        Keys ``video, frames, valid_frames, t0_s, t0_uncertainty_s, warnings``
+        plus ``valid_fraction``, ``mean_separation_px``,
+        ``centroid_sigma_px`` (median per-frame centroid uncertainty),
+        ``angle_noise_rad`` (the statistical angle error from pixel noise,
+        see :func:`servoscope.markers.angle_error_analysis`) and
+        ``angle_noise_measured_rad`` (the tracking error measured on the
+        markers' rigid-motion null channel, codec errors included; None
+        with fewer than 20 valid frames; from the separation's spread when
+        the camera shakes), ``camera_shake_px`` (the shake seen, RMS px).
+        """
+        analysis = angle_error_analysis(self) if self.n_valid else {}
+        return {
+            "video": self.video,
+            "frames": self.n_frames,
+            "valid_frames": self.n_valid,
+            "valid_fraction": (self.n_valid / self.n_frames) if self.n_frames else 0.0,
+            "mean_separation_px": analysis.get("separation_px"),
+            "centroid_sigma_px": analysis.get("centroid_sigma_px"),
+            "angle_noise_rad": analysis.get("angle_sigma_rad"),
+            "angle_noise_measured_rad": analysis.get("measured_noise_rad"),
+            "camera_shake_px": analysis.get("camera_shake_px"),
+            "t0_s": self.t0_s,
+            "t0_uncertainty_s": self.t0_uncertainty_s,
+            # Where t0 can lie, and how many frames at the switch were partly lit (the
+            # exposure's evidence: none when the switch fell between two exposures).
+            "t0_interval_s": None if self.t0_earliest_s is None else [self.t0_earliest_s, self.t0_latest_s],
+            "led_partial_frames": self.led_partial_frames,
+            "warnings": list(self.warnings),
+        }
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The per-frame table as a dict of columns (pandas-free)."""
+        return {
+            "frame": self.frame,
+            "time_s": self.time_s,
+            "angle_rad": self.angle_rad,
+            "valid": self.valid.astype(np.int64),
+            "lead_x_px": self.lead_xy_px[:, 0],
+            "lead_y_px": self.lead_xy_px[:, 1],
+            "trail_x_px": self.trail_xy_px[:, 0],
+            "trail_y_px": self.trail_xy_px[:, 1],
+            "lead_area_px": self.lead_area_px,
+            "trail_area_px": self.trail_area_px,
+            "lead_sigma_px": self.lead_sigma_px,
+            "trail_sigma_px": self.trail_sigma_px,
+            "angle_sigma_rad": self.angle_sigma_rad,
+            "led_level": self.led_level,
+            "angle_time_s": self.angle_time_s,
+            **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
+        }
+
+    def to_pandas(self):
+        """The per-frame table as a pandas DataFrame (pandas is optional)."""
+        try:
+            import pandas as pd
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise ImportError("Track.to_pandas() needs pandas: pip install pandas") from exc
+        df = pd.DataFrame(self.columns())
+        df["reason"] = self.reason
+        return df
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write the per-frame table (``frame,time_s,angle_rad,valid,…``)."""
+        cols = self.columns()
+        names = list(cols) + ["reason"]
+        lines = [",".join(names)]
+        for i in range(self.n_frames):
+            row = []
+            for name in names[:-1]:
+                value = cols[name][i]
+                if name in ("frame", "valid", "intra"):
+                    row.append(str(int(value)))
+                elif np.isnan(value):
+                    row.append("")
+                else:
+                    row.append(repr(float(value)))
+            row.append(self.reason[i].replace(",", ";"))
+            lines.append(",".join(row))
+        Path(path).write_text("\n".join(lines) + "\n")
