@@ -8,6 +8,7 @@ import sys
 import control
 import numpy as np
 import pytest
+from servoscope.report import write_report
 
 
 def _truth(manifest):
@@ -39,7 +40,7 @@ def test_phase_measured_from_led(quick_campaign, quick_result):
 
 
 def test_written_files(tmp_path, quick_result):
-    paths = quick_result.write(tmp_path / "out")
+    paths = write_report(quick_result, tmp_path / "out")
     result = json.loads(paths["result"].read_text())
     for key in ("num", "den", "gain", "natural_frequency_rad_s", "damping_ratio", "dead_time_s"):
         assert key in result["model"]

@@ -16,6 +16,7 @@ import pytest
 
 from servoscope.campaign import identify, load_campaign
 from servoscope.simulate import simulate_campaign
+from servoscope.report import write_report
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +68,7 @@ def test_mpeg2_model_within_the_accuracy_targets(mpeg2_campaign, result, truth, 
 
 
 def test_report_shows_the_codec_check(result, tmp_path):
-    paths = result.write(tmp_path)
+    paths = write_report(result, tmp_path)
     html = paths["report"].read_text()
     # The fast dwell's row: its flag whole, and what the other frames did against its I-frames.
     row = html[html.index("<td>dwell_08_15.00Hz</td><td>15</td>"):]

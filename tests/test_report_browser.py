@@ -1,6 +1,6 @@
 """The HTML report in a real browser: Debian's chromium, headless.
 
-Three looks at the report that ``IdentificationResult.write()`` produces:
+Three looks at the report that ``servoscope.write_report()`` produces:
 
 1. the DOM after loading, from a copy of the page with a small probe script
    first in ``<head>``: it records script errors, failed resource loads and
@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from servoscope.report import write_report
 
 CHROMIUM = shutil.which("chromium")
 pytestmark = pytest.mark.skipif(
@@ -129,7 +130,7 @@ def test_the_checks_catch_a_broken_page(tmp_path):
 
 
 def test_report_renders_in_chromium(quick_result, tmp_path):
-    paths = quick_result.write(tmp_path / "out")
+    paths = write_report(quick_result, tmp_path / "out")
     report = paths["report"]
 
     probe = _probe(report, tmp_path)

@@ -30,6 +30,7 @@ from servoscope.sysid import (
     model_step_metrics,
     select_order,
 )
+from servoscope.report import write_report
 
 K, WN, ZETA, TAU = 0.23, 37.0, 0.65, 0.085
 F_HZ = np.geomspace(0.5, 15.0, 14)
@@ -387,8 +388,8 @@ def test_dwell_without_valid_frames_and_motionless_step_are_left_out(tmp_path, q
     assert any(step in w and "left out" in w and "never moves" in w for w in summary["warnings"])
     assert summary["step"] is None
     assert all(math.isfinite(v) for v in result.model.params.values())
-    paths = result.write(tmp_path / "out")
-    html = paths["report"].read_text() if "report" in paths else (tmp_path / "out" / "report.html").read_text()
+    paths = write_report(result, tmp_path / "out")
+    html = paths["report"].read_text()
     assert "never moves" in html and f"{dead}: only 0 valid frames; dwell left out" in html
     written = json.loads((tmp_path / "out" / "result.json").read_text())
     assert any("never moves" in w for w in written["warnings"])

@@ -2,12 +2,12 @@
 
 The public API, in pipeline order::
 
-    from servoscope import simulate_campaign, Campaign, identify
+    from servoscope import simulate_campaign, Campaign, identify, write_report
 
     manifest = simulate_campaign("twin", preset="quick", seed=1)   # digital twin
     result = identify(Campaign.load(manifest))                      # track → fit → model
     result.model.transfer_function                                  # python-control TF
-    result.write("out")                                             # result.json, report.html
+    write_report(result, "out")                                     # result.json, report.html, CSVs
 
 Names are imported lazily, so ``import servoscope`` stays fast.
 """
@@ -30,6 +30,8 @@ _EXPORTS = {
     "IdentificationResult": "servoscope.campaign",
     "identify": "servoscope.campaign",
     "load_campaign": "servoscope.campaign",
+    "track_campaign": "servoscope.campaign",
+    "write_report": "servoscope.report",
     "fit_sine": "servoscope.sysid",
     "fit_second_order": "servoscope.sysid",
     "FrequencyResponse": "servoscope.sysid",

@@ -358,6 +358,7 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
+    from .report import write_report
 
     order = _parse_order(order_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
@@ -371,7 +372,7 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if failures:
         manifest = manifest.without(failures)
     result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going)
-    paths = result.write(out_dir)
+    paths = write_report(result, out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     elif not quiet:
@@ -411,7 +412,7 @@ def _print_model(result, truth: dict | None = None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from .report.build import _PARAM_LABELS, dead_time_stderr_s, model_equation
+    from .sysid.model_text import PARAM_LABELS, model_equation
     from .report.numbers import format_interval, format_with_uncertainty
 
     m = result.model
@@ -433,7 +434,7 @@ def _print_model(result, truth: dict | None = None) -> None:
     rows.append(("−3 dB bandwidth (rad/s)", m.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"), "rel"))
     dead = result.dead_time_s
     dead_ms = None if dead is None else 1e3 * dead
-    dead_err_s = dead_time_stderr_s(result)
+    dead_err_s = result.dead_time_stderr_s
     dead_err = None if dead_err_s is None else 1e3 * dead_err_s
     true_dead = truth_model.get("dead_time_s")
     estimates = result.dead_time_estimates
@@ -452,7 +453,7 @@ def _print_model(result, truth: dict | None = None) -> None:
         value_text, err_text = format_with_uncertainty(value, err)
         if err is None:
             value_text = _fmt(value)
-        cells = [_PARAM_LABELS.get(name, name), value_text, err_text if err is not None else "—",
+        cells = [PARAM_LABELS.get(name, name), value_text, err_text if err is not None else "—",
                  "—" if ci is None else format_interval(ci[0], ci[1], err)]
         if truth is not None:
             if value is None or true is None:
@@ -484,6 +485,7 @@ def demo(out_dir: Path, preset: str, seed: int, quiet: bool) -> None:
     """Simulate the paper's campaign, identify it, and compare with the truth."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign
+    from .report import write_report
     from .simulate import simulate_campaign
 
     click.echo(f"rendering the '{preset}' campaign (digital twin) into {out_dir / 'campaign'} …")
@@ -492,7 +494,7 @@ def demo(out_dir: Path, preset: str, seed: int, quiet: bool) -> None:
     click.echo(f"tracking {len(manifest.tests)} videos and identifying …")
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
         result = run_identify(manifest, progress=progress)
-    paths = result.write(out_dir / "result")
+    paths = write_report(result, out_dir / "result")
     truth = json.loads((manifest_path.parent / "truth.json").read_text())
     _print_model(result, truth)
     click.echo(f"report: {paths['report']}")

@@ -1,6 +1,7 @@
-"""Campaigns: the manifest, and running the whole identification."""
+"""Campaigns: the manifest, running the whole identification, and its result."""
 
 from .manifest import Campaign, TestSpec, load_campaign
-from .runner import IdentificationResult, identify, track_campaign
+from .result import IdentificationResult
+from .runner import identify, track_campaign
 
 __all__ = ["Campaign", "IdentificationResult", "TestSpec", "identify", "load_campaign", "track_campaign"]

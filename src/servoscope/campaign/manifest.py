@@ -120,28 +120,6 @@ class Campaign:
         """Read and validate a manifest; see :func:`load_campaign`."""
         return load_campaign(path, check_videos=check_videos, keep_going=keep_going)
 
-    def track(self, **options):
-        """Track every video; see :func:`servoscope.campaign.track_campaign`.
-
-        Returns
-        -------
-        dict of label → Track
-        """
-        from .runner import track_campaign
-
-        return track_campaign(self, **options)
-
-    def identify(self, **options):
-        """Track and identify; see :func:`servoscope.campaign.identify`.
-
-        Returns
-        -------
-        IdentificationResult
-        """
-        from .runner import identify
-
-        return identify(self, **options)
-
     def without(self, reasons: dict[str, str]) -> "Campaign":
         """The same campaign less some tests, each with the reason it was left out."""
         return Campaign(

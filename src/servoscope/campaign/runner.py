@@ -8,14 +8,12 @@ notebook or a test can look at any of them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from .._io import write_json_atomic, write_text_atomic
-from ..results import jsonable
 from ..camera.exposure import ExposureEstimate, estimate_exposure
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
@@ -30,6 +28,7 @@ from ..sysid import (
     rigid_motion_null,
 )
 from .manifest import Campaign, TestSpec, load_campaign
+from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
 
 __all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
 
@@ -109,11 +108,6 @@ def track_campaign(
     return tracks
 
 
-def _t0(test: TestSpec, track: Track) -> float | None:
-    # A t0 typed in the manifest wins: the user knows something the LED does not.
-    return test.t0_s if test.t0_s is not None else track.t0_s
-
-
 def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
     """A warning when the LED's switch was found in some of a campaign's videos but not in others.
 
@@ -137,11 +131,6 @@ def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | 
     return (f"LED found in {found} of {len(need)} videos but not in {len(missing)}: {', '.join(missing)}; these have "
             "no input start, so no phase and no dead time from them (each video's own warning says why; check the "
             "LED colour, or give their t0_s in the manifest)")
-
-
-def _t0_stderr(test: TestSpec, track: Track) -> float | None:
-    """Standard uncertainty of :func:`_t0` (s): the LED's, or 0 for a t0 typed in the manifest."""
-    return track.t0_uncertainty_s if test.t0_s is None else 0.0
 
 
 def campaign_exposure(campaign: Campaign, tracks: dict[str, Track]) -> ExposureEstimate:
@@ -252,29 +241,6 @@ def step_dead_time_model_stderr(model, run_step: Callable[[object], object]) -> 
     return float(math.sqrt(max(g @ cov @ g, 0.0)))
 
 
-def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
-    """The dead time from the dwells' phases and from the step, each with its own interval.
-
-    Returns
-    -------
-    dict
-        ``{"phase": {...} or None, "step": {...} or None}``, each
-        ``{"value_s", "stderr_s", "ci95_s", "shared_t0_stderr_s"}``.
-    """
-    out: dict = {"phase": None, "step": None}
-    if model.dead_time_s is not None and math.isfinite(model.dead_time_s):
-        se = math.hypot(model.dead_time_stderr_s or 0.0, shared_t0_s)
-        value = float(model.dead_time_s)
-        out["phase"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
-                        "shared_t0_stderr_s": shared_t0_s}
-    if step is not None and step.dead_time_s is not None and math.isfinite(step.dead_time_s):
-        se = float(step.dead_time_stderr_s or 0.0)
-        value = float(step.dead_time_s)
-        out["step"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
-                       "shared_t0_stderr_s": None}
-    return out
-
-
 def dead_time_disagreement(estimates: dict) -> str | None:
     """A warning when the phase and step dead times differ by more than their uncertainties allow (95 %)."""
     phase, step = estimates.get("phase"), estimates.get("step")
@@ -289,188 +255,6 @@ def dead_time_disagreement(estimates: dict) -> str | None:
             f"{abs(diff) / se:.1f} standard errors: the linear model or the "
             "input start of one of them is not what the footage shows (check the LED, the exposure and the "
             "step's fit)")
-
-
-@dataclass
-class IdentificationResult:
-    """Everything one identification produced.
-
-    Attributes
-    ----------
-    campaign : Campaign
-    tracks : dict of label → Track
-    sine_fits : dict of label → SineFit
-    frequency_response : FrequencyResponse
-    model : TransferFunctionFit
-        The fitted 2nd-order model (magnitude fit, the paper's eq. 6).
-    step : StepAnalysis or None
-        The step test, with the dead time fitted against the model.
-    step_label : str or None
-    warnings : list of str
-    exposure : ExposureEstimate or None
-        The camera's exposure: given, or estimated from the LED's switches.
-    shared_t0_stderr_s : float
-        The part of the dwells' t0 uncertainty they may share (see
-        :func:`shared_t0_stderr`), added to the phase dead time's.
-    """
-
-    campaign: Campaign
-    tracks: dict[str, Track]
-    sine_fits: dict[str, SineFit]
-    frequency_response: FrequencyResponse
-    model: TransferFunctionFit
-    step: StepAnalysis | None = None
-    step_label: str | None = None
-    warnings: list[str] = field(default_factory=list)
-    exposure: ExposureEstimate | None = None
-    shared_t0_stderr_s: float = 0.0
-
-    @property
-    def transfer_function(self):
-        """The identified model as a python-control TransferFunction (without the delay)."""
-        return self.model.transfer_function
-
-    @property
-    def dead_time_s(self) -> float | None:
-        """Dead time: the more precise of the step test's (LED off → blade moving,
-        fitted against the model) and the dwells' phases' (complex fit); None
-        without either. Its stderr and interval are the same estimate's."""
-        source = self.dead_time_source
-        if source is None:
-            return None
-        return self.dead_time_estimates["step" if source == "step test" else "phase"]["value_s"]
-
-    @property
-    def dead_time_source(self) -> str | None:
-        """"step test" or "frequency response (phase)": where :attr:`dead_time_s` comes from."""
-        estimates = self.dead_time_estimates
-        step, phase = estimates["step"], estimates["phase"]
-        if step is not None and (phase is None or step["stderr_s"] <= phase["stderr_s"]):
-            return "step test"
-        if phase is not None:
-            return "frequency response (phase)"
-        return None
-
-    @property
-    def dead_time_estimates(self) -> dict:
-        """The dead time from the dwells' phases and from the step, each with its interval (see :func:`dead_time_estimates`)."""
-        return dead_time_estimates(self.model, self.step, self.shared_t0_stderr_s)
-
-    @property
-    def dead_time_stderr_s(self) -> float | None:
-        """Standard error of :attr:`dead_time_s`, from the same estimate."""
-        chosen = self.dead_time_estimates.get({"step test": "step", "frequency response (phase)": "phase"}.get(
-            self.dead_time_source or "", ""))
-        return None if chosen is None else chosen["stderr_s"]
-
-    def summary(self) -> dict:
-        """The content of ``result.json``: plain types only."""
-        model = dict(jsonable(self.model.summary()))
-        estimates = self.dead_time_estimates
-        # The model's own delay estimate (from the phases, complex fit) stays
-        # visible; the model's dead time is the best one available, and its
-        # stderr and interval are that estimate's (one name, one estimator).
-        model["dead_time_from_phase_s"] = model.get("dead_time_s")
-        model["dead_time_from_phase_stderr_s"] = None if estimates["phase"] is None else estimates["phase"]["stderr_s"]
-        model["dead_time_s"] = self.dead_time_s
-        model["dead_time_source"] = self.dead_time_source
-        model["dead_time_stderr_s"] = self.dead_time_stderr_s
-        chosen = estimates["step"] if self.dead_time_source == "step test" else estimates["phase"]
-        if chosen is not None and isinstance(model.get("ci95"), dict):
-            model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen["ci95_s"])}
-        tests = []
-        for test in self.campaign.tests:
-            track = self.tracks[test.label]
-            entry = {
-                "label": test.label,
-                "video": test.video.name,
-                "kind": test.kind,
-                "frequency_hz": test.frequency_hz,
-                "amplitude": test.amplitude,
-                "frames": track.n_frames,
-                "valid_frames": track.n_valid,
-                "t0_s": _t0(test, track),
-                "t0_uncertainty_s": _t0_stderr(test, track),
-                "warnings": list(track.warnings),
-            }
-            fit = self.sine_fits.get(test.label)
-            if fit is not None:
-                entry["sine_fit"] = jsonable(fit.summary())
-                entry["warnings"] += list(fit.warnings)
-            tests.append(entry)
-        return jsonable(
-            {
-                "servoscope_version": _version(),
-                "campaign": str(self.campaign.path),
-                "input_units": self.campaign.input_units,
-                "output_units": "rad",
-                "model": model,
-                "bandwidth_rad_s": self.model.bandwidth_rad_s,
-                "bandwidth_hz": self.model.bandwidth_rad_s / (2 * math.pi),
-                "dead_time_s": self.dead_time_s,
-                "dead_time": {**estimates, "source": {"step test": "step", "frequency response (phase)": "phase"}.get(
-                    self.dead_time_source or "")},
-                "exposure": None if self.exposure is None else self.exposure.summary(),
-                "frequency_response": self.frequency_response.summary(),
-                "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
-                "tests": tests,
-                "skipped": [{"label": label, "reason": reason} for label, reason in self.campaign.skipped],
-                "warnings": list(self.warnings),
-            }
-        )
-
-    def write(self, out_dir: str | Path) -> dict[str, Path]:
-        """Write result.json, report.html, frequency_response.csv and tracks/<label>.csv.
-
-        Returns
-        -------
-        dict of name → path written
-        """
-        from ..report.build import build_report  # deferred: matplotlib is slow to import
-
-        out = Path(out_dir)
-        (out / "tracks").mkdir(parents=True, exist_ok=True)
-        paths = {}
-        # Every file goes to a temporary name first and is renamed when whole:
-        # a run killed half-way leaves no output that looks complete.
-        for label, track in self.tracks.items():
-            _write_via_tmp(out / "tracks" / f"{label}.csv", track.to_csv)
-        paths["tracks"] = out / "tracks"
-        paths["frequency_response"] = out / "frequency_response.csv"
-        _write_via_tmp(paths["frequency_response"], self.frequency_response.to_csv)
-        paths["report"] = out / "report.html"
-        paths["figures"] = out / "figures"
-        write_text_atomic(paths["report"], build_report(self, figures_dir=paths["figures"]))
-        # result.json last: its presence says the run finished.
-        paths["result"] = out / "result.json"
-        write_json_atomic(paths["result"], self.summary())
-        return paths
-
-    def _repr_html_(self) -> str:
-        from ..report.build import model_equation
-
-        rows = "".join(
-            f"<tr><td>{name}</td><td>{self.model.params.get(name, float('nan')):.5g}</td>"
-            f"<td>{self.model.stderr.get(name, float('nan')):.2g}</td></tr>"
-            for name in self.model.param_names
-        )
-        bw = self.model.bandwidth_rad_s
-        return (
-            f"<p>{model_equation(self.model, self.dead_time_s)}; bandwidth {bw:.4g} rad/s</p>"
-            f"<table><tr><th>parameter</th><th>value</th><th>std. error</th></tr>{rows}</table>"
-        )
-
-
-def _write_via_tmp(path: Path, writer: Callable[[Path], None]) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    writer(tmp)
-    tmp.replace(path)
-
-
-def _version() -> str:
-    from .. import __version__
-
-    return __version__
 
 
 def identify(
@@ -537,7 +321,7 @@ def identify(
     amplitudes = []
     for test in campaign.sine_tests:
         track = tracks[test.label]
-        t0 = _t0(test, track)
+        t0 = input_start(test, track)
         if t0 is None:
             warnings.append(f"{test.label}: no input start (LED or t0_s): phase unknown, steady state taken from the first frame")
         if track.n_valid < 5:
@@ -551,7 +335,7 @@ def identify(
                 test.frequency_hz,
                 t0_s=t0,
                 # Each dwell's whole t0 error; the part they may share is added to the dead time (below).
-                t0_stderr_s=own_t0_stderr.get(test.label, _t0_stderr(test, track)),
+                t0_stderr_s=own_t0_stderr.get(test.label, input_start_stderr(test, track)),
                 settle_s=campaign.settle_s,
                 valid=track.valid,
                 # Harmonics the two markers do not share are tracking
@@ -591,7 +375,7 @@ def identify(
     if campaign.step_tests:
         test = campaign.step_tests[0]
         track = tracks[test.label]
-        t0 = _t0(test, track)
+        t0 = input_start(test, track)
         if t0 is None:
             warnings.append(f"{test.label}: step test without an input start (LED or t0_s): dead time not measured")
         elif track.n_valid < 10:
@@ -599,7 +383,7 @@ def identify(
         else:
             def run_step(tf, track=track, test=test, t0=t0):
                 return analyse_step(track.angle_time_s, track.angle_rad, t0_s=t0, step_size=test.amplitude,
-                                    valid=track.valid, model=tf, t0_stderr_s=_t0_stderr(test, track))
+                                    valid=track.valid, model=tf, t0_stderr_s=input_start_stderr(test, track))
 
             try:
                 step = run_step(model.transfer_function)

@@ -11,9 +11,10 @@ import numpy as np
 from .figures import bode_figure, dwell_figure, overlay_figure, step_figure
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
+from ..sysid.model_text import PARAM_LABELS, model_equation
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..campaign.runner import IdentificationResult
+    from ..campaign.result import IdentificationResult
 
 __all__ = ["build_report", "model_phase_deg"]
 
@@ -42,37 +43,6 @@ def _track_xy_recorded(result: "IdentificationResult", label: str, index: int) -
     if camera is not None:
         lead, trail = camera.distort_points(np.stack([lead, trail]))
     return lead, trail
-
-
-_PARAM_LABELS = {
-    "gain": "gain K (output per input unit)",
-    "natural_frequency_rad_s": "natural frequency ωn (rad/s)",
-    "damping_ratio": "damping ratio ζ",
-    "dead_time_s": "dead time from the dwells' phases τ (s)",
-    "pole_rad_s": "real pole (rad/s)",
-    "zero_rad_s": "real zero (rad/s)",
-}
-
-
-def _poly_text(coeffs) -> str:
-    n = len(coeffs) - 1
-    terms = []
-    for i, c in enumerate(coeffs):
-        power = n - i
-        if c == 0:
-            continue
-        s_part = "" if power == 0 else ("s" if power == 1 else f"s^{power}")
-        terms.append(f"{c:.5g}{'·' if s_part else ''}{s_part}")
-    return " + ".join(terms) or "0"
-
-
-def model_equation(model, dead_time_s: float | None) -> str:
-    """The identified model as text: the paper's eq. 6 form for 2nd order, polynomials otherwise."""
-    tau = "not measured" if dead_time_s is None else f"{1e3 * dead_time_s:.1f} ms"
-    if tuple(model.order) == (0, 2) and model.natural_frequency_rad_s is not None:
-        wn, z = model.natural_frequency_rad_s, model.damping_ratio
-        return (f"G(s) = {model.gain:.4g} · {wn:.4g}² / (s² + 2·{z:.3g}·{wn:.4g}·s + {wn:.4g}²) · e^(−sτ), τ = {tau}")
-    return f"G(s) = ({_poly_text(model.num)}) / ({_poly_text(model.den)}) · e^(−sτ), τ = {tau}"
 
 
 def _codec_cell(fit) -> str:
@@ -159,7 +129,7 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
             # With the input-start timing the dwells may share (not in the fit's own error).
             lo_hi, err = phase_dead["ci95_s"], phase_dead["stderr_s"]
         value_text, err_text = format_with_uncertainty(model.params.get(name), err)
-        row = [_PARAM_LABELS.get(name, name), value_text, err_text,
+        row = [PARAM_LABELS.get(name, name), value_text, err_text,
                "—" if lo_hi is None else format_interval(lo_hi[0], lo_hi[1], err)]
         if boot:
             b = boot.get(name)

@@ -10,6 +10,8 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from .._io import atomic_path
+
 __all__ = ["ReportSection", "figure_png_base64", "render_html"]
 
 _CSS = """
@@ -73,12 +75,14 @@ class ReportSection:
         if self.figures_dir is not None and name:
             # The same figures as files, for papers and slides: PNG and SVG.
             self.figures_dir.mkdir(parents=True, exist_ok=True)
-            fig.savefig(self.figures_dir / f"{name}.png", dpi=150)
+            with atomic_path(self.figures_dir / f"{name}.png") as tmp:
+                fig.savefig(tmp, dpi=150)
             # No date and fixed element ids: the same result gives the same bytes.
             import matplotlib
 
             with matplotlib.rc_context({"svg.hashsalt": "servoscope"}):
-                fig.savefig(self.figures_dir / f"{name}.svg", metadata={"Date": None})
+                with atomic_path(self.figures_dir / f"{name}.svg") as tmp:
+                    fig.savefig(tmp, metadata={"Date": None})
         return figure_png_base64(fig)
 
     def warnings(self, items: list[str]) -> "ReportSection":

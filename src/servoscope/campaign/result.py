@@ -1,0 +1,246 @@
+"""The result of identifying a campaign, and the dead-time bookkeeping it reports.
+
+A data object below the runner (which makes it) and the report (which draws
+it): nothing here imports either, so a notebook, a test or the report can
+hold, save and look at a result without the stage that produced it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .._io import atomic_path, write_json_atomic
+from ..camera.exposure import ExposureEstimate
+from ..markers.track import Track
+from ..results import jsonable
+from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
+from ..sysid.model_text import model_equation
+from .manifest import Campaign, TestSpec
+
+__all__ = ["IdentificationResult", "dead_time_estimates", "input_start", "input_start_stderr", "package_version"]
+
+
+def input_start(test: TestSpec, track: Track) -> float | None:
+    """A test's input start (s): its manifest ``t0_s``, else the LED's switch in its track; None without either."""
+    # A t0 typed in the manifest wins: the user knows something the LED does not.
+    return test.t0_s if test.t0_s is not None else track.t0_s
+
+
+
+def input_start_stderr(test: TestSpec, track: Track) -> float | None:
+    """Standard uncertainty of :func:`input_start` (s): the LED's, or 0 for a t0 typed in the manifest."""
+    return track.t0_uncertainty_s if test.t0_s is None else 0.0
+
+
+
+def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
+    """The dead time from the dwells' phases and from the step, each with its own interval.
+
+    Returns
+    -------
+    dict
+        ``{"phase": {...} or None, "step": {...} or None}``, each
+        ``{"value_s", "stderr_s", "ci95_s", "shared_t0_stderr_s"}``.
+    """
+    out: dict = {"phase": None, "step": None}
+    if model.dead_time_s is not None and math.isfinite(model.dead_time_s):
+        se = math.hypot(model.dead_time_stderr_s or 0.0, shared_t0_s)
+        value = float(model.dead_time_s)
+        out["phase"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
+                        "shared_t0_stderr_s": shared_t0_s}
+    if step is not None and step.dead_time_s is not None and math.isfinite(step.dead_time_s):
+        se = float(step.dead_time_stderr_s or 0.0)
+        value = float(step.dead_time_s)
+        out["step"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
+                       "shared_t0_stderr_s": None}
+    return out
+
+
+
+@dataclass
+class IdentificationResult:
+    """Everything one identification produced.
+
+    Attributes
+    ----------
+    campaign : Campaign
+    tracks : dict of label → Track
+    sine_fits : dict of label → SineFit
+    frequency_response : FrequencyResponse
+    model : TransferFunctionFit
+        The fitted 2nd-order model (magnitude fit, the paper's eq. 6).
+    step : StepAnalysis or None
+        The step test, with the dead time fitted against the model.
+    step_label : str or None
+    warnings : list of str
+    exposure : ExposureEstimate or None
+        The camera's exposure: given, or estimated from the LED's switches.
+    shared_t0_stderr_s : float
+        The part of the dwells' t0 uncertainty they may share (see
+        :func:`shared_t0_stderr`), added to the phase dead time's.
+    """
+
+    campaign: Campaign
+    tracks: dict[str, Track]
+    sine_fits: dict[str, SineFit]
+    frequency_response: FrequencyResponse
+    model: TransferFunctionFit
+    step: StepAnalysis | None = None
+    step_label: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    exposure: ExposureEstimate | None = None
+    shared_t0_stderr_s: float = 0.0
+
+    @property
+    def transfer_function(self):
+        """The identified model as a python-control TransferFunction (without the delay)."""
+        return self.model.transfer_function
+
+    @property
+    def dead_time_s(self) -> float | None:
+        """Dead time: the more precise of the step test's (LED off → blade moving,
+        fitted against the model) and the dwells' phases' (complex fit); None
+        without either. Its stderr and interval are the same estimate's."""
+        source = self.dead_time_source
+        if source is None:
+            return None
+        return self.dead_time_estimates["step" if source == "step test" else "phase"]["value_s"]
+
+    @property
+    def dead_time_source(self) -> str | None:
+        """"step test" or "frequency response (phase)": where :attr:`dead_time_s` comes from."""
+        estimates = self.dead_time_estimates
+        step, phase = estimates["step"], estimates["phase"]
+        if step is not None and (phase is None or step["stderr_s"] <= phase["stderr_s"]):
+            return "step test"
+        if phase is not None:
+            return "frequency response (phase)"
+        return None
+
+    @property
+    def dead_time_estimates(self) -> dict:
+        """The dead time from the dwells' phases and from the step, each with its interval (see :func:`dead_time_estimates`)."""
+        return dead_time_estimates(self.model, self.step, self.shared_t0_stderr_s)
+
+    @property
+    def dead_time_stderr_s(self) -> float | None:
+        """Standard error of :attr:`dead_time_s`, from the same estimate."""
+        chosen = self.dead_time_estimates.get({"step test": "step", "frequency response (phase)": "phase"}.get(
+            self.dead_time_source or "", ""))
+        return None if chosen is None else chosen["stderr_s"]
+
+    def summary(self) -> dict:
+        """The content of ``result.json``: plain types only."""
+        model = dict(jsonable(self.model.summary()))
+        estimates = self.dead_time_estimates
+        # The model's own delay estimate (from the phases, complex fit) stays
+        # visible; the model's dead time is the best one available, and its
+        # stderr and interval are that estimate's (one name, one estimator).
+        model["dead_time_from_phase_s"] = model.get("dead_time_s")
+        model["dead_time_from_phase_stderr_s"] = None if estimates["phase"] is None else estimates["phase"]["stderr_s"]
+        model["dead_time_s"] = self.dead_time_s
+        model["dead_time_source"] = self.dead_time_source
+        model["dead_time_stderr_s"] = self.dead_time_stderr_s
+        chosen = estimates["step"] if self.dead_time_source == "step test" else estimates["phase"]
+        if chosen is not None and isinstance(model.get("ci95"), dict):
+            model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen["ci95_s"])}
+        tests = []
+        for test in self.campaign.tests:
+            track = self.tracks[test.label]
+            entry = {
+                "label": test.label,
+                "video": test.video.name,
+                "kind": test.kind,
+                "frequency_hz": test.frequency_hz,
+                "amplitude": test.amplitude,
+                "frames": track.n_frames,
+                "valid_frames": track.n_valid,
+                "t0_s": input_start(test, track),
+                "t0_uncertainty_s": input_start_stderr(test, track),
+                "warnings": list(track.warnings),
+            }
+            fit = self.sine_fits.get(test.label)
+            if fit is not None:
+                entry["sine_fit"] = jsonable(fit.summary())
+                entry["warnings"] += list(fit.warnings)
+            tests.append(entry)
+        return jsonable(
+            {
+                "servoscope_version": package_version(),
+                "campaign": str(self.campaign.path),
+                "input_units": self.campaign.input_units,
+                "output_units": "rad",
+                "model": model,
+                "bandwidth_rad_s": self.model.bandwidth_rad_s,
+                "bandwidth_hz": self.model.bandwidth_rad_s / (2 * math.pi),
+                "dead_time_s": self.dead_time_s,
+                "dead_time": {**estimates, "source": {"step test": "step", "frequency response (phase)": "phase"}.get(
+                    self.dead_time_source or "")},
+                "exposure": None if self.exposure is None else self.exposure.summary(),
+                "frequency_response": self.frequency_response.summary(),
+                "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
+                "tests": tests,
+                "skipped": [{"label": label, "reason": reason} for label, reason in self.campaign.skipped],
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def write_tables(self, out_dir: str | Path) -> dict[str, Path]:
+        """Write tracks/<label>.csv and frequency_response.csv, each whole or not at all.
+
+        Returns
+        -------
+        dict of name → path written (``"tracks"``: the folder)
+        """
+        out = Path(out_dir)
+        (out / "tracks").mkdir(parents=True, exist_ok=True)
+        for label, track in self.tracks.items():
+            with atomic_path(out / "tracks" / f"{label}.csv") as tmp:
+                track.to_csv(tmp)
+        paths = {"tracks": out / "tracks", "frequency_response": out / "frequency_response.csv"}
+        with atomic_path(paths["frequency_response"]) as tmp:
+            self.frequency_response.to_csv(tmp)
+        return paths
+
+    def write_summary(self, out_dir: str | Path) -> Path:
+        """Write result.json (:meth:`summary`); written last, its presence says a run finished."""
+        path = Path(out_dir) / "result.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(path, self.summary())
+        return path
+
+    def write(self, out_dir: str | Path) -> dict[str, Path]:
+        """Write the result's data: tracks/<label>.csv, frequency_response.csv, then result.json.
+
+        The HTML report and its figures are the report stage's:
+        :func:`servoscope.write_report` writes these files and the report.
+
+        Returns
+        -------
+        dict of name → path written
+        """
+        paths = self.write_tables(out_dir)
+        paths["result"] = self.write_summary(out_dir)
+        return paths
+
+    def _repr_html_(self) -> str:
+        rows = "".join(
+            f"<tr><td>{name}</td><td>{self.model.params.get(name, float('nan')):.5g}</td>"
+            f"<td>{self.model.stderr.get(name, float('nan')):.2g}</td></tr>"
+            for name in self.model.param_names
+        )
+        bw = self.model.bandwidth_rad_s
+        return (
+            f"<p>{model_equation(self.model, self.dead_time_s)}; bandwidth {bw:.4g} rad/s</p>"
+            f"<table><tr><th>parameter</th><th>value</th><th>std. error</th></tr>{rows}</table>"
+        )
+
+
+def package_version() -> str:
+    """servoscope's version, as written into result.json."""
+    from .. import __version__
+
+    return __version__
+
