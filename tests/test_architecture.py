@@ -19,12 +19,10 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 
 # Strongly connected components of the import graph (sorted module names).
-KNOWN_CYCLES: set[tuple[str, ...]] = {
-}
+KNOWN_CYCLES: set[tuple[str, ...]] = set()
 
 # (importing module, imported module, private name)
-KNOWN_PRIVATE: set[tuple[str, str, str]] = {
-}
+KNOWN_PRIVATE: set[tuple[str, str, str]] = set()
 
 
 def _modules() -> dict[str, Path]:
