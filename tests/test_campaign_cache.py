@@ -94,7 +94,7 @@ def test_damaged_or_foreign_entries_are_misses(tmp_path):
     cache.paths("c")[1].unlink()  # the JSON is written last: without it the entry is incomplete
     assert cache.load("c") is None and "c" not in cache
     assert cache.load("never-stored") is None
-    assert not list(cache.folder.glob("*.tmp")), "temporary files left behind"
+    assert not list(cache.folder.glob("*.tmp*")), "temporary files left behind"
 
 
 def test_file_digest_hashes_the_whole_file(tmp_path):

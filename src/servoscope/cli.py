@@ -218,6 +218,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     (with --fps), or a Photron .mraw/.cihx or Phantom .cine file.
     """
     video, name, default_csv = _footage(video, **source)
+    from ._io import atomic_path
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
     from .markers.selection import parse_marker_spec
@@ -248,7 +249,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     if out_csv is None:
         out_csv = default_csv
     out_csv.parent.mkdir(parents=True, exist_ok=True)
-    result.to_csv(out_csv)
+    with atomic_path(out_csv) as tmp:
+        result.to_csv(tmp)
     s = result.summary()
     t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
     if result.t0_earliest_s is not None and result.led_partial_frames == 0:

@@ -40,6 +40,7 @@ import numpy as np
 from ..errors import ServoscopeError
 from ..video.reader import quarter_turns
 from .model import CameraModel
+from .._io import write_text_atomic
 
 __all__ = ["CalibrationResult", "calibrate", "parse_board"]
 
@@ -174,7 +175,7 @@ class CalibrationResult:
         data["board"] = list(self.board)
         data["views_used"] = list(self.views_used)
         try:
-            path.write_text(json.dumps(data, indent=2) + "\n")
+            write_text_atomic(path, json.dumps(data, indent=2) + "\n")
         except OSError as exc:
             raise ServoscopeError(f"{path}: cannot write calibration ({exc.strerror or exc})") from None
 

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
+from .._io import write_text_atomic
 
 __all__ = ["CameraModel"]
 
@@ -95,7 +96,7 @@ class CameraModel:
         }
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        write_text_atomic(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     # -- geometry ------------------------------------------------------------
     @property

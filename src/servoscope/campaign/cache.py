@@ -33,7 +33,6 @@ import hashlib
 import io
 import json
 import math
-import os
 import zipfile
 from functools import lru_cache
 from pathlib import Path
@@ -42,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..markers.tracker import Track, TrackerSettings
+from .._io import write_bytes_atomic
 
 __all__ = ["CACHE_FORMAT_VERSION", "TrackCache", "file_digest", "settings_fingerprint", "tracks_equal"]
 
@@ -266,10 +266,10 @@ class TrackCache:
         }
         self.folder.mkdir(parents=True, exist_ok=True)
         npz_path, json_path = self.paths(key)
-        _write_atomic(npz_path, _npz_bytes(arrays))
+        write_bytes_atomic(npz_path, _npz_bytes(arrays))
         # JSON last: its presence marks the entry complete. NaN is allowed
         # (Python's json reads it back) so float fields round-trip exactly.
-        _write_atomic(json_path, json.dumps(meta, indent=1, allow_nan=True).encode("utf-8"))
+        write_bytes_atomic(json_path, json.dumps(meta, indent=1, allow_nan=True).encode("utf-8"))
 
     def clear(self) -> int:
         """Remove every entry; returns how many files were removed."""
@@ -295,19 +295,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    # The pid in the temporary name keeps two writers of the same key (two
-    # runs sharing a cache) from interleaving; both write the same content.
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        tmp.replace(path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def tracks_equal(a: Track, b: Track) -> bool:

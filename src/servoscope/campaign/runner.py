@@ -20,8 +20,6 @@ from ..markers.tracker import Track, TrackerSettings
 from ..sysid import (
     FrequencyResponse,
     SineFit,
-    StepAnalysis,
-    TransferFunctionFit,
     analyse_step,
     fit_sine,
     fit_transfer_function,

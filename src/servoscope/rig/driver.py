@@ -30,6 +30,7 @@ from typing import Any, Callable, Protocol as _TypingProtocol
 from ..errors import ServoscopeError
 from .plan import Dwell, SweepPlan, default_video_name, plan_to_toml
 from .protocols import QUARTER_US_PER_US, ServoProtocol, get_protocol
+from .._io import write_text_atomic
 
 __all__ = [
     "RigSettings",
@@ -505,7 +506,7 @@ def drive_plan(
     })
     try:
         campaign_path.parent.mkdir(parents=True, exist_ok=True)
-        campaign_path.write_text(plan_to_toml(done), encoding="utf-8")
+        write_text_atomic(campaign_path, plan_to_toml(done))
     except OSError as exc:
         raise ServoscopeError(f"{campaign_path}: cannot write ({exc.strerror or exc})") from None
     return DriveResult(campaign_path, log_path, done, max(late_ms, default=0.0))

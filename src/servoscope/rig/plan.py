@@ -32,6 +32,7 @@ import numpy as np
 
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
+from .._io import write_text_atomic
 
 __all__ = [
     "Dwell",
@@ -459,7 +460,7 @@ def write_plan(plan: SweepPlan, path: str | Path) -> Path:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(plan_to_toml(plan), encoding="utf-8")
+        write_text_atomic(path, plan_to_toml(plan))
     except OSError as exc:
         raise ServoscopeError(f"{path}: cannot write ({exc.strerror or exc})") from None
     return path

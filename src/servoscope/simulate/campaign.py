@@ -25,6 +25,7 @@ from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
 from .scene import Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
+from .._io import write_text_atomic
 
 #: A preset's default real-camera options, to tell which ones a campaign set.
 _DEFAULT = CampaignPreset(name="default", servo=None, frequencies_hz=(1.0,))
@@ -358,9 +359,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         tests.append({"video": name, **rec})
 
     camera.save(out / "camera.json")
-    (out / "truth.json").write_text(json.dumps(_truth(p, seed, camera, fps, scene, tests), allow_nan=False) + "\n")
+    write_text_atomic(out / "truth.json", json.dumps(_truth(p, seed, camera, fps, scene, tests), allow_nan=False) + "\n")
     toml_path = out / "campaign.toml"
-    toml_path.write_text(_campaign_toml(p, scene, tests, fps if p.frames_format is not None else None))
+    write_text_atomic(toml_path, _campaign_toml(p, scene, tests, fps if p.frames_format is not None else None))
     return toml_path
 
 

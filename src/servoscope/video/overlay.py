@@ -14,7 +14,6 @@ recorded image.
 from __future__ import annotations
 
 import math
-import os
 import unicodedata
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from .reader import iter_frames, probe_video
 from .writer import VideoWriter, container_suffixes
+from .._io import atomic_path
 
 __all__ = ["write_overlay", "annotate_frame", "overlay_bit_rate"]
 
@@ -200,9 +200,8 @@ def write_overlay(
     width, height = info.width + info.width % 2, info.height + info.height % 2  # yuv420p needs even sizes
     rate = bit_rate if bit_rate is not None else overlay_bit_rate(width, height, fps)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_name(f".{out_path.stem}.{os.getpid()}.tmp{out_path.suffix}")
     n_frames = 0
-    try:
+    with atomic_path(out_path) as tmp:
         # x264 "veryfast" with its own threads: this video is for eyes, its
         # bytes need not be reproducible, and ultrafast smears thin lines.
         with VideoWriter(tmp, width, height, fps, codec="h264", bit_rate=rate, preset="veryfast", threads=0) as writer:
@@ -229,9 +228,6 @@ def write_overlay(
                 n_frames += 1
         if n_rows > per_frame * n_frames:
             raise ServoscopeError(_mismatch(video_path, track, n_rows, n_frames))
-        tmp.replace(out_path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return out_path
 
 
