@@ -173,3 +173,15 @@ def test_t0_uncertainty_adds_to_the_dead_time_uncertainty():
         z.append((r.dead_time_s - TAU) / r.dead_time_stderr_s)
     z = np.abs(z)
     assert np.max(z) < 3.5 and 0.3 < np.median(z) < 1.2
+
+
+def test_output_moved_flags_a_step_lost_in_the_noise():
+    # The flag identify decides on, and the warning it comes with (text unchanged).
+    t, y = record(1)
+    moved = analyse_step(t, y, t0_s=T0, step_size=STEP)
+    assert moved.output_moved
+    assert not any(w.startswith("no discernible step response") for w in moved.warnings)
+    flat = np.random.default_rng(1).normal(0.0, 1e-3, t.size)  # the blade never moves
+    still = analyse_step(t, flat, t0_s=T0, step_size=STEP)
+    assert not still.output_moved
+    assert "no discernible step response (change within 10 noise sigma)" in still.warnings

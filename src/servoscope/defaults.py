@@ -35,3 +35,7 @@ NEAR_NYQUIST = 0.8
 #: A fit parameter whose delete-one jackknife error exceeds its Jacobian error this many times
 #: earns a warning (it rests on one dwell).
 JACKKNIFE_WIDENING_WARNING = 2.0
+#: A step test's output "moved" when its change exceeds this many noise sigmas; below it the
+#: step's metrics are noise, the analysis says "no discernible step response" and identify
+#: leaves the step out (StepAnalysis.output_moved).
+STEP_DISCERNIBLE_SIGMA = 10.0

@@ -392,7 +392,7 @@ def identify(
             except ServoscopeError as exc:
                 warnings.append(f"{test.label}: step test left out: {exc}")
             else:
-                if any(w.startswith("no discernible step response") for w in step.warnings):
+                if not step.output_moved:
                     # Metrics of a step that never moved would be NaN or noise.
                     warnings.append(
                         f"{test.label}: step test left out: the output never moves "

@@ -52,7 +52,7 @@ from scipy.optimize import least_squares
 
 from servoscope.errors import ServoscopeError
 from servoscope.results import readonly
-from servoscope.sysid.step_result import StepAnalysis
+from servoscope.sysid.step_result import StepAnalysis, step_discernible
 
 __all__ = ["StepAnalysis", "analyse_step", "model_step_metrics"]
 
@@ -264,7 +264,7 @@ def _response_metrics(
     """
     nan = float("nan")
     rise = overshoot = peak_time = settling = dead_thr = nan
-    if abs(change) <= max(10.0 * sigma, 0.0) or change == 0:
+    if not step_discernible(change, sigma):
         warns.append("no discernible step response (change within 10 noise sigma)")
         return rise, overshoot, peak_time, settling, dead_thr
     r = (yp - initial) / change

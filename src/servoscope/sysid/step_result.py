@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from servoscope.defaults import STEP_DISCERNIBLE_SIGMA
 from servoscope.errors import ServoscopeError
 from servoscope.results import html_table, import_pandas, jsonable
 from servoscope.sysid.plotting import new_axes, plot_step
@@ -17,6 +18,25 @@ if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
 __all__ = ["StepAnalysis"]
+
+
+def step_discernible(change: float, noise_sigma: float) -> bool:
+    """Whether a step's output change stands out of its noise.
+
+    Parameters
+    ----------
+    change : float
+        Output change across the step (output units).
+    noise_sigma : float
+        Robust noise estimate (output units).
+
+    Returns
+    -------
+    bool
+        True when ``|change|`` exceeds ``STEP_DISCERNIBLE_SIGMA`` noise sigmas (and is not 0).
+    """
+    # Written as the negation of "within the noise" so that NaN reads as it always did (moved).
+    return not (abs(change) <= max(STEP_DISCERNIBLE_SIGMA * noise_sigma, 0.0) or change == 0)
 
 
 @dataclass(frozen=True)
@@ -122,6 +142,14 @@ class StepAnalysis:
             return None
         sel = self.time_s >= self.t0_s
         return self.y[sel] - self.predicted(self.time_s[sel])
+
+    @property
+    def output_moved(self) -> bool:
+        """Whether the output moved: its change stands out of the noise (:func:`step_discernible`).
+
+        False comes with the warning "no discernible step response": the metrics are then NaN or noise.
+        """
+        return step_discernible(self.change, self.noise_sigma)
 
     def summary(self) -> dict[str, Any]:
         """Scalar results as a JSON-serializable dict (NaN -> None).
