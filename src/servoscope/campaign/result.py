@@ -8,8 +8,9 @@ hold, save and look at a result without the stage that produced it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from .._io import atomic_path, write_json_atomic
 from ..camera.exposure import ExposureEstimate
@@ -18,6 +19,9 @@ from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.model_text import model_equation
 from .manifest import Campaign, TestSpec
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["IdentificationResult", "dead_time_estimates", "input_start", "input_start_stderr", "package_version"]
 
@@ -224,6 +228,25 @@ class IdentificationResult:
         paths = self.write_tables(out_dir)
         paths["result"] = self.write_summary(out_dir)
         return paths
+
+    def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
+        """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes for the gains in dB against ω in rad/s (a new figure's when None).
+        phase_ax : matplotlib.axes.Axes, optional
+            Axes for the phases in degrees (measured, and the model's with its dead time).
+
+        Returns
+        -------
+        list
+            The artists, as :meth:`TransferFunctionFit.plot` returns them: the measured
+            points', then the model's gain line and, with `phase_ax`, its phase line.
+        """
+        model = self.model if self.model.data is not None else replace(self.model, data=self.frequency_response)
+        return model.plot(ax, phase_ax=phase_ax)
 
     def _repr_html_(self) -> str:
         rows = "".join(
