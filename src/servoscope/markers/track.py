@@ -54,7 +54,7 @@ class Track:
         When the angle was sampled: ``time_s`` for a global shutter; with a
         rolling shutter, ``time_s + readout_s·y_eff/height``, y_eff the
         markers' rows weighted by their share of the angle's motion (see
-        :func:`_angle_row_weights`). Fit the angle against this.
+        :func:`servoscope.camera.rolling_shutter.angle_row_weights`). Fit the angle against this.
     readout_s : float
         Rolling-shutter readout time the track was corrected for (0: none).
     t0_earliest_s, t0_latest_s : float or None

@@ -1,0 +1,88 @@
+"""The first frame: which blobs are the markers (selection, "auto" colours), and the error when none is."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ServoscopeError
+from .colour import AUTO, ColourModel
+from .marker_state import MarkerTracker
+from .selection import auto_colour_models, choose_markers, marker_candidates
+from .settings import TrackerSettings
+
+__all__ = ["choose_first", "nothing_matches", "take_auto_colours"]
+
+
+def take_auto_colours(path: Path, rgb: np.ndarray, trackers, led_model: ColourModel | None) -> None:
+    """Give each marker set to ``"auto"`` a colour: the blobs most like a pair of stickers (see :mod:`.selection`).
+
+    The LED's and the other marker's colours are excluded.
+
+    Raises
+    ------
+    ServoscopeError
+        When no coloured blob is left for a marker.
+    """
+    exclude = [led_model] if led_model is not None else []
+    exclude += [m.model for m in trackers if m.model is not None]
+    models = auto_colour_models(rgb, exclude)
+    for tracker in trackers:
+        if tracker.model is None:
+            if not models:
+                raise ServoscopeError(f"{path}: no coloured blob found for the {tracker.name} marker (\"auto\")")
+            tracker.model = models.pop(0)
+
+
+def choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSettings, row_offset: int = 0,
+                  row_step: int = 1) -> list[str]:
+    """Choose each marker's blob in the first frame (see :mod:`.selection`); set the trackers' hints.
+
+    Returns the close-call warnings. When a marker's colour matches no blob
+    big enough to be a candidate, no hint is set and the first detection
+    reports it as before (the closest coloured blobs listed), unless the marker
+    is pinned: then the pin's error names the nearest blob.
+    """
+    lead, trail = trackers
+    cands = [marker_candidates(rgb, t.model, t.model.hue) if t.model is not None else [] for t in trackers]
+    pinned = settings.lead_near is not None or settings.trail_near is not None
+    if not pinned and not all(cands):
+        return []
+    def in_image(near):
+        # Pins are in frame pixels; a field's image has every row_step-th row from row_offset.
+        return None if near is None else (near[0], (near[1] - row_offset) / row_step)
+
+    choice = choose_markers(cands[0], cands[1], lead_near=in_image(settings.lead_near),
+                            trail_near=in_image(settings.trail_near),
+                            lead_colour=_spec_text(lead.seed), trail_colour=_spec_text(trail.seed), source=str(path))
+    lead.hint = (choice.lead.x_px, choice.lead.y_px)
+    trail.hint = (choice.trail.x_px, choice.trail.y_px)
+    return choice.warnings
+
+
+def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:
+    """The two blobs of distinct hue most like a pair of stickers, right one first (see :mod:`.selection`)."""
+    return auto_colour_models(rgb, exclude)
+
+
+def nothing_matches(path: Path, tracker: MarkerTracker, rgb: np.ndarray) -> str:
+    """Error message for a marker colour that matches nothing, with the closest blobs."""
+    from .candidates import find_candidates
+
+    text = _spec_text(tracker.seed) if tracker.seed != AUTO else "auto"
+    msg = f"{path}: the {tracker.name} marker's colour {text} matches nothing in the first frame"
+    cands = find_candidates(rgb)
+    if not cands:
+        return msg + "; no saturated blob in that frame at all"
+    hue = tracker.model.hue * 2.0 if tracker.model is not None else 0.0
+    cands.sort(key=lambda c: abs(((c.hue_deg - hue + 180.0) % 360.0) - 180.0))
+    listed = ", ".join(f"#{c.number} {c.colour_hex} (hue {c.hue_deg:.0f}°, {c.area_px} px at {c.x_px:.0f},{c.y_px:.0f})"
+                       for c in cands[:3])
+    return msg + f"; closest coloured blobs: {listed} (see `servoscope markers`)"
+
+
+def _spec_text(spec) -> str:
+    if isinstance(spec, str):
+        return spec
+    return "#%02x%02x%02x" % tuple(int(round(c)) for c in spec)
