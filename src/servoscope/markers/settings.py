@@ -62,12 +62,12 @@ class TrackerSettings:
         reference). ``"reference-rgb"``: the previous path (every frame
         converted to RGB, HSV masks, ``centroid`` estimator), for comparison.
         With ``centroid="projected"``, ``"auto"`` picks ``"reference-rgb"``.
-    backend : {"auto", "cpu", "cuda"}
-        Where the kernel runs. ``"auto"`` and ``"cpu"``: this machine's CPU.
-        ``"cuda"``: requires a CUDA GPU (or ``NUMBA_ENABLE_CUDASIM=1``) and
-        fails clearly without one; the paper's batch reduction is
-        :mod:`servoscope.markers.gpu` (measured by ``servoscope bench``), the
-        windowed sub-pixel kernel itself still runs on the CPU.
+    backend : {"auto", "cpu"}
+        Where the kernel runs: this machine's CPU. ``"cuda"`` is refused with
+        an error: no tracking engine runs on a GPU yet (the GPU pass of
+        :mod:`servoscope.markers.gpu` is a whole-frame batch classifier,
+        measured by ``servoscope bench``), and a track must not claim a GPU
+        it did not use.
     lead_near, trail_near : (float, float) or None
         Pin a marker by position (px in the first frame), as a user clicks a
         point: the marker is the blob of its colour there (an error when
@@ -107,13 +107,19 @@ class TrackerSettings:
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")
-BACKENDS = ("auto", "cpu", "cuda")
+BACKENDS = ("auto", "cpu")
+#: Backends once offered, refused with what to use instead.
+RETIRED_BACKENDS = {"cuda": "no tracking engine runs on a GPU: the GPU pass (servoscope.markers.gpu, measured by "
+                            "`servoscope bench`) classifies whole frames in batches and is not a tracker; "
+                            "use backend=\"cpu\" (or \"auto\")"}
 
 
 def resolve_engine(settings: TrackerSettings) -> str:
     """The engine ``settings`` asks for, "auto" resolved; raises on unknown names."""
     if settings.engine not in ENGINES:
         raise ServoscopeError(f"engine: {settings.engine!r} is not one of {', '.join(ENGINES)}")
+    if settings.backend in RETIRED_BACKENDS:
+        raise ServoscopeError(f"backend: {settings.backend!r}: {RETIRED_BACKENDS[settings.backend]}")
     if settings.backend not in BACKENDS:
         raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
     if settings.engine == "auto":

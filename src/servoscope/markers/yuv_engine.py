@@ -289,11 +289,6 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
     led_local = None
     prev = None
     learned = False
-    if settings.backend == "cuda":
-        from .gpu import require_cuda
-
-        require_cuda()  # the per-window sub-pixel work stays on the CPU (see gpu.py)
-
     gain_of = GlobalGain()
     gain = 1.0  # this frame's illumination against the first frame's (see illumination.py)
     gains: list[float] = []
