@@ -167,3 +167,27 @@ def test_remote_worker_without_the_video_says_what_is_needed(dask_scheduler, qui
     )
     with pytest.raises(ServoscopeError, match="same path"):
         track_campaign(missing, scheduler=dask_scheduler)
+
+
+def test_a_local_cluster_says_nothing_when_the_dashboard_port_is_taken():
+    """Two campaigns at once (two test workers, two users) must not print Dask's "Port 8787 is
+    already in use" into servoscope's output: the cluster asks for no fixed dashboard port."""
+    import socket
+    import warnings
+
+    from servoscope.campaign.parallel import start_local_cluster
+
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8787))
+        holder.listen()
+    except OSError:
+        pass  # already taken by someone else: the same situation
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cluster = start_local_cluster(1, 1)
+            cluster.close()
+        assert not [w for w in caught if "8787" in str(w.message)]
+    finally:
+        holder.close()

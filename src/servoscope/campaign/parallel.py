@@ -286,7 +286,9 @@ def start_local_cluster(n_workers: int | None, threads_per_worker_video: int, *,
         with dask.config.set({"distributed.worker.multiprocessing-method": method}):
             return LocalCluster(
                 n_workers=n_workers, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=silence_logs,
+                # No dashboard wanted, but None means the default port (8787): with two
+                # campaigns at once (two test workers) the second warned on stderr.
+                dashboard_address=":0", silence_logs=silence_logs,
                 env={"OPENCV_FOR_THREADS_NUM": share, THREADS_ENV: share},
             )
     finally:
