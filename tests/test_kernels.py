@@ -7,6 +7,7 @@ import pytest
 
 from servoscope.markers import TrackerSettings, track_video
 from servoscope.markers import kernels as K
+from servoscope.markers import kernel_numpy
 from servoscope.simulate import Scene
 from servoscope.simulate.clips import render_clip
 from servoscope.video.reader import iter_yuv_frames
@@ -134,7 +135,7 @@ def test_luma_alpha_at_chroma_resolution_agrees_with_chroma():
     cu, cv = um - ub, vm - vb
     aC = (cu * (sU - ub) + cv * (sV - vb)) / (cu * cu + cv * cv)
     my = np.full(K.N_BINS, yb)
-    aref = K._luma_alpha_at_chroma_res_np(prm, Y.ravel(), px, py, dx, dy, d2, radius, my, 0, 1, U.shape,
+    aref = kernel_numpy._luma_alpha_at_chroma_res_np(prm, Y.ravel(), px, py, dx, dy, d2, radius, my, 0, 1, U.shape,
                                           px[sup], py[sup], aY)
     edge = (aC > 0.05) & (aC < 0.95)
     assert edge.sum() > 100
