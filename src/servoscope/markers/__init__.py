@@ -1,4 +1,27 @@
-"""Markers: colour models, soft centroids, tracking through video, error analysis."""
+"""Markers: colour models, soft centroids, tracking through video, error analysis.
+
+The stage's modules:
+
+* the result and its settings: :mod:`.track` (:class:`Track`), :mod:`.settings`
+  (:class:`TrackerSettings`, the engine it resolves to);
+* the driver, :mod:`.tracker` (:func:`track_video`): runs an engine, then the
+  frame checks, the camera stage (:mod:`servoscope.camera.undistort`,
+  :mod:`servoscope.camera.rolling_shutter`), the angle stage
+  (:mod:`servoscope.angle`) and the LED's t0;
+* the engines, each reporting one :class:`~.frame_record.FrameRecord` a frame
+  into one :class:`~.frame_record.TrackLog`: :mod:`.yuv_engine` ("numba",
+  "numpy": the kernels of :mod:`.kernels`) and :mod:`.rgb_engine`
+  ("reference-rgb");
+* what the engines share: :mod:`.first_frame` (which blobs are the markers;
+  :mod:`.selection`, :mod:`.candidates`), :mod:`.marker_state` (one marker's
+  learned colour, shape and motion), :mod:`.colour`, :mod:`.centroid`,
+  :mod:`.moments`, :mod:`.illumination`, :mod:`.led_level` and
+  :mod:`.led_timing` (the LED), :mod:`.frame_checks` (rigid blade, duplicated
+  frames), :mod:`.timebase`;
+* :mod:`.error_analysis` (the angle's error budget) and :mod:`.gpu` (a
+  whole-frame batch classifier on CUDA, measured by ``servoscope bench``; not
+  a tracking engine).
+"""
 
 from .candidates import Candidate, draw_candidates, find_candidates
 from .centroid import SoftCentroid, soft_centroid
