@@ -264,6 +264,11 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
+    if exposure_s is None:
+        # The camera stage's reading of this video's shutter (a campaign pools every video's).
+        from .camera.exposure import blur_evidence
+
+        click.echo(f"{name}: exposure: {blur_evidence(result).describe()}")
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
     if overlay is not None:

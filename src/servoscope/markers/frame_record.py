@@ -102,6 +102,7 @@ class TrackLog:
     xy: dict[str, list[tuple[float, float]]] = field(default_factory=lambda: {"lead": [], "trail": []})
     area: dict[str, list[float]] = field(default_factory=lambda: {"lead": [], "trail": []})
     sigma: dict[str, list[float]] = field(default_factory=lambda: {"lead": [], "trail": []})
+    shape: dict[str, list[tuple[float, float, float]]] = field(default_factory=lambda: {"lead": [], "trail": []})
     reasons: list[str] = field(default_factory=list)
     repeated: list[bool] = field(default_factory=list)
     led_signal: list[float] = field(default_factory=list)
@@ -111,7 +112,7 @@ class TrackLog:
     snapshot_index: int = 0
 
     def add(self, rec: FrameRecord) -> None:
-        """Append one frame: centroids in frame rows, areas and uncertainties (NaN where a marker is missing).
+        """Append one frame: centroids in frame rows, areas, uncertainties and second moments (NaN where a marker is missing).
 
         A field (``row_step`` 2) has half the rows: its areas count double and its
         y uncertainty is that of a pixel twice as tall. The first valid whole
@@ -125,10 +126,13 @@ class TrackLog:
                 self.xy[name].append((float(m.x_px), float(rec.row_offset + rec.row_step * m.y_px)))
                 self.area[name].append(m.m00 * rec.row_step)
                 self.sigma[name].append(rec.found[name].sigma_px * math.sqrt(0.5 * (1 + rec.row_step**2)))
+                # Second moments in frame pixels: a field's rows are twice as tall.
+                self.shape[name].append((float(m.mu20), float(m.mu11) * rec.row_step, float(m.mu02) * rec.row_step**2))
             else:
                 self.xy[name].append((math.nan, math.nan))
                 self.area[name].append(math.nan)
                 self.sigma[name].append(math.nan)
+                self.shape[name].append((math.nan, math.nan, math.nan))
         self.reasons.append(rec.reason)
         self.repeated.append(rec.repeated)
         if self.snapshot is None and not rec.reason and rec.row_step == 1:

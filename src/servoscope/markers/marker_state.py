@@ -48,6 +48,7 @@ class MarkerTracker:
         # more than the arithmetic.
         self._last: tuple[float, float] | None = None
         self._velocity: tuple[float, float] = (0.0, 0.0)
+        self._step_px = 0.0  # the last frame-to-frame move (px), unsmoothed
         self.search_radius_px = settings.search_radius_px
         self.margin_px = settings.support_margin_px
         self.method = settings.centroid
@@ -73,6 +74,21 @@ class MarkerTracker:
     def has_position(self) -> bool:
         """Whether a centroid has been accepted yet."""
         return self._last is not None
+
+    @property
+    def blur_reach_px(self) -> float:
+        """How far motion blur may smear this sticker past its still outline, each way (px).
+
+        An exposure lasts at most a frame interval, so a sticker that moves d px
+        a frame is smeared along at most d px: half of it on each side of its
+        centroid. d is the larger of the smoothed velocity and the last move,
+        with a quarter more for acceleration (a step's start). Small moves
+        (under ½ px of reach) count as none, so that slow footage is measured
+        exactly as a still sticker.
+        """
+        d = max(math.hypot(*self._velocity), self._step_px)
+        reach = 0.5 * 1.25 * d
+        return reach if reach >= 0.5 else 0.0
 
     def predicted_xy(self) -> tuple[float, float] | None:
         """Where the marker should be in this frame (px): last position plus velocity."""
@@ -158,6 +174,9 @@ class MarkerTracker:
             return ""
         m00, major, minor = self.reference
         a, b = soft.moments.axes_px
+        # Motion blur stretches a moving sticker along its motion: up to (2·reach)²/12 px² more
+        # variance along it (a box of the smear's length), its area unchanged.
+        major = math.sqrt(major**2 + self.blur_reach_px**2 / 3.0)
         # Edge effects (noise, codec, pixel phase) change the area in
         # proportion to perimeter / area ∝ 1 / radius: the tolerance is for a
         # 13 px radius sticker and grows for smaller ones.
@@ -180,6 +199,7 @@ class MarkerTracker:
         if self._last is not None:
             vx, vy = self._velocity
             self._velocity = (0.5 * vx + 0.5 * (x - self._last[0]), 0.5 * vy + 0.5 * (y - self._last[1]))
+            self._step_px = math.hypot(x - self._last[0], y - self._last[1])
         self._last = (x, y)
         if blob.flaw:
             return
@@ -221,6 +241,7 @@ class MarkerTracker:
     def lose(self) -> None:
         """Forget the velocity: the marker was not found in this frame."""
         self._velocity = (0.0, 0.0)
+        self._step_px = 0.0
 
 
 def _local_unmixing_centroid(rgb: np.ndarray, window: tuple[int, int, int, int],

@@ -64,6 +64,12 @@ class Track:
         Partly lit frames at the switch (0, 1 or 2): evidence of the
         exposure, pooled over a campaign by
         :func:`servoscope.camera.exposure.estimate_exposure`.
+    lead_shape_px2, trail_shape_px2 : ndarray, shape (n, 3)
+        Each sticker's central second moments (mu20, mu11, mu02) of its soft
+        membership, divided by its area (px², the recorded image's pixels);
+        NaN where not found. Motion during the exposure stretches them along
+        the motion: the evidence of the shutter that
+        :func:`servoscope.camera.exposure.blur_evidence` reads.
     intra : ndarray of bool or None
         Frames the codec coded on their own (I-frames; every frame of
         uncompressed video); None when unknown. ``fit_sine`` checks the
@@ -95,6 +101,8 @@ class Track:
     t0_earliest_s: float | None = None
     t0_latest_s: float | None = None
     led_partial_frames: int | None = None
+    lead_shape_px2: np.ndarray | None = None
+    trail_shape_px2: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -102,6 +110,9 @@ class Track:
         for name in ("lead_sigma_px", "trail_sigma_px", "angle_sigma_rad"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full(n, np.nan))
+        for name in ("lead_shape_px2", "trail_shape_px2"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full((n, 3), np.nan))
         # ...and the angle's sample times: a global shutter's are the frame times.
         if self.angle_time_s is None:
             self.angle_time_s = np.array(self.time_s, dtype=np.float64)

@@ -205,6 +205,8 @@ def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str 
         t0_earliest_s=None if t0_window is None else float(t0_window[0]),
         t0_latest_s=None if t0_window is None else float(t0_window[1]),
         led_partial_frames=start.partial_frames,
+        lead_shape_px2=np.asarray(log.shape["lead"], dtype=np.float64).reshape(-1, 3),
+        trail_shape_px2=np.asarray(log.shape["trail"], dtype=np.float64).reshape(-1, 3),
     )
 
 

@@ -226,9 +226,13 @@ def _window(tracker: MarkerTracker, shape, centre=None) -> tuple[int, int, int, 
     return x0, y0, x1, y1
 
 
-def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob | None:
-    """The marker's blob from its kernel output row, or None when the window's class is implausible."""
+def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape, prm: np.ndarray | None = None) -> Blob | None:
+    """The marker's blob from its kernel output row, or None when the window's class is implausible.
+
+    ``prm`` is the kernel row the frame was measured with (its support); default the learned one.
+    """
     st = tracker.yuv
+    prm = st.prm if prm is None else prm
     row = row.tolist()  # Python floats: indexing and arithmetic on NumPy scalars cost more
     n = row[K.Q.N]
     if not n > 0 or not row[K.Q.M00] > 0:
@@ -244,12 +248,12 @@ def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob
     if math.hypot(row[K.Q.X] - row[K.Q.BX], row[K.Q.Y] - row[K.Q.BY]) > 0.5 * tracker.extent_px + 2.0:
         return None
     m = Moments(row[K.Q.M00], row[K.Q.X], row[K.Q.Y], row[K.Q.MU20], row[K.Q.MU11], row[K.Q.MU02])
-    radius = float(st.prm[K.P.RADIUS])
+    radius = float(prm[K.P.RADIUS])
     rx = ry = radius
-    if st.prm[K.P.RECT]:
+    if prm[K.P.RECT]:
         # A rectangle's support reaches its own bounding box, not the disk around it.
-        hu, hv, c, s = (float(st.prm[i]) for i in (K.P.HALF_U, K.P.HALF_V, K.P.COS, K.P.SIN))
-        sm = float(st.prm[K.P.RECT_MARGIN])
+        hu, hv, c, s = (float(prm[i]) for i in (K.P.HALF_U, K.P.HALF_V, K.P.COS, K.P.SIN))
+        sm = float(prm[K.P.RECT_MARGIN])
         rx, ry = abs(hu * c) + abs(hv * s) + sm, abs(hu * s) + abs(hv * c) + sm
     support_out = m.x_px - rx < 0 or m.y_px - ry < 0 or m.x_px + rx > w - 1 or m.y_px + ry > h - 1
     at_border = bool(support_out or row[K.Q.RING_N] < 8)
@@ -365,7 +369,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
         led_prm[0] = 1.0 if led_local is not None else 0.0
         kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, params, led_prm, out, led_out)
         for k, tracker in enumerate(trackers):
-            blob = _kernel_blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
+            blob = _kernel_blob(tracker, out[k], windows[k], shape, params[k]) if windows[k] is not None else None
             if blob is None:
                 # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
                 # then measure it with the kernel around what was found.

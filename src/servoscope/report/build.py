@@ -87,7 +87,9 @@ def exposure_text(result: "IdentificationResult") -> str:
         return f"unknown: {e.detail}"
     if e.source == "given":
         return f"{1e3 * e.value_s:.4g} ms (given)"
-    return f"{1e3 * e.value_s:.3g} ms, 95 % {1e3 * e.ci95_s[0]:.3g}–{1e3 * e.ci95_s[1]:.3g} ms, from the LED: {e.detail}"
+    where = {"LED": "the LED", "blur": "the stickers' motion blur", "LED+blur": "the LED and the motion blur"}
+    return (f"{1e3 * e.value_s:.3g} ms, 95 % {1e3 * e.ci95_s[0]:.3g}–{1e3 * e.ci95_s[1]:.3g} ms, from "
+            f"{where.get(e.source, e.source)}: {e.detail}")
 
 
 def build_report(result: "IdentificationResult", figures_dir: Path | None = None) -> str:

@@ -252,7 +252,7 @@ class FrequencyResponse:
         return bool(np.any(np.isfinite(self.phase_deg)))
 
     # ---------------------------------------------------------------- exports
-    def corrected_for_exposure(self, exposure_s: float) -> "FrequencyResponse":
+    def corrected_for_exposure(self, exposure_s: float, exposure_stderr_s: float = 0.0) -> "FrequencyResponse":
         """Undo the camera's averaging of the motion over each exposure.
 
         A frame integrates the output over its exposure window
@@ -265,6 +265,10 @@ class FrequencyResponse:
         ----------
         exposure_s : float
             Exposure time e, seconds (≥ 0, below 1/f of every point).
+        exposure_stderr_s : float
+            Its standard uncertainty (s) when it was estimated (from motion
+            blur): each gain's standard error grows by gain·|d ln sinc(f·e)/de|·σ_e
+            (in quadrature; the same error for every dwell, a shared systematic).
 
         Raises
         ------
@@ -280,7 +284,15 @@ class FrequencyResponse:
             raise ServoscopeError(
                 f"exposure {e:g} s spans a whole period at {self.frequency_hz.max():g} Hz: the motion averages out"
             )
-        return dataclasses.replace(self, gain=self.gain / factor, gain_stderr=self.gain_stderr / factor)
+        gain = self.gain / factor
+        gain_stderr = self.gain_stderr / factor
+        se_e = float(exposure_stderr_s)
+        if se_e > 0 and e > 0:
+            x = np.pi * self.frequency_hz * e
+            # d ln sinc(f e)/de = (1/e)·(x·cot x − 1), x = π f e
+            dlog = np.where(x > 1e-6, (x / np.tan(np.where(x > 1e-6, x, 1.0)) - 1.0) / e, 0.0)
+            gain_stderr = np.hypot(gain_stderr, gain * np.abs(dlog) * se_e)
+        return dataclasses.replace(self, gain=gain, gain_stderr=gain_stderr)
 
     def _rows(self) -> list[dict[str, Any]]:
         cols = {
