@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from test_manifest import GOOD, _tiny_video
+from support import GOOD, tiny_video as _tiny_video
 
 
 def run_cli(*args, cwd=None):

@@ -29,6 +29,8 @@ def test_a_fast_stickers_smear_is_not_misshapen_but_a_still_ones_is():
     smear = _smeared(10.0)  # σx 4.86 px: +21 % over the reference's 4
     assert "misshapen" in _tracker_moving(0.0).flaw(smear)  # a still sticker cannot look like that
     assert _tracker_moving(10.0).flaw(smear) == ""  # one moving 10 px a frame can (exposure ≤ a frame)
+    # A short shutter leaves a fast sticker unsmeared: that is whole too (blur may, not must).
+    assert _tracker_moving(10.0).flaw(_smeared(0.0)) == ""
     # ... but not beyond what a full frame's exposure allows
     assert "misshapen" in _tracker_moving(10.0).flaw(_smeared(22.0))
     assert math.isclose(_tracker_moving(10.0).blur_reach_px, 6.25)

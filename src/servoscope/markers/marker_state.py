@@ -175,8 +175,9 @@ class MarkerTracker:
         m00, major, minor = self.reference
         a, b = soft.moments.axes_px
         # Motion blur stretches a moving sticker along its motion: up to (2·reach)²/12 px² more
-        # variance along it (a box of the smear's length), its area unchanged.
-        major = math.sqrt(major**2 + self.blur_reach_px**2 / 3.0)
+        # variance along it (a box of the smear's length), its area unchanged. It may, not must:
+        # the major axis is allowed anywhere from the still one to the most smeared.
+        smeared = math.sqrt(major**2 + self.blur_reach_px**2 / 3.0)
         # Edge effects (noise, codec, pixel phase) change the area in
         # proportion to perimeter / area ∝ 1 / radius: the tolerance is for a
         # 13 px radius sticker and grows for smaller ones.
@@ -189,7 +190,7 @@ class MarkerTracker:
         # hidden part shows first as lost area.
         if area_ratio > 1.0 + 2.5 * tol:
             return f"{self.name} marker merged with something (area {100 * area_ratio:.0f} % of its reference)"
-        if abs(a / major - 1.0) > 2.0 * tol or abs(b / minor - 1.0) > 2.0 * tol:
+        if a / major < 1.0 - 2.0 * tol or a / smeared > 1.0 + 2.0 * tol or abs(b / minor - 1.0) > 2.0 * tol:
             return f"{self.name} marker misshapen (axes {a:.1f}/{b:.1f} px, reference {major:.1f}/{minor:.1f} px)"
         return ""
 

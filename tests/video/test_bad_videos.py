@@ -13,6 +13,7 @@ import pytest
 from servoscope.errors import ServoscopeError
 from servoscope.markers import TrackerSettings, track_video
 from servoscope.video import probe_video
+from support import DATA
 
 
 @pytest.fixture(scope="module")
@@ -105,6 +106,6 @@ def test_cli_track_never_shows_a_traceback(corpus, tmp_path, name):
 
 def test_fuzz_findings_stay_fixed():
     """Inputs that atheris found crashing the video opener (fuzz/fuzz_inputs.py) now give a clear error."""
-    for path in sorted((Path(__file__).parent / "data" / "fuzz").glob("video-*")):
+    for path in sorted((DATA / "fuzz").glob("video-*")):
         with pytest.raises(ServoscopeError, match="cannot decode|not a readable video|no video stream|empty"):
             probe_video(path)

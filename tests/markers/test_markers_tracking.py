@@ -28,7 +28,7 @@ from servoscope.markers import (
 from servoscope.simulate import Scene, polygon_coverage
 from servoscope.simulate.clips import Occluder, render_clip
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import ROOT
 
 
 def _baseline_module():

@@ -18,7 +18,7 @@ import pytest
 
 from servoscope.markers import kernels as K
 
-TESTS = str(Path(__file__).parent)
+TESTS = str(Path(__file__).resolve().parents[1])  # where support.py is
 
 
 def _run(code: str, **env: str) -> str:
@@ -30,7 +30,7 @@ def _run(code: str, **env: str) -> str:
 
 def test_class_tables_are_the_cpu_classifier_bit_for_bit():
     sys.path.insert(0, TESTS)
-    from test_kernels import _frame, _params
+    from support import kernel_frame as _frame, kernel_params as _params
 
     from servoscope.markers import gpu
 
@@ -54,7 +54,7 @@ _SIMULATED = """
     import sys
     import numpy as np
     sys.path.insert(0, {tests!r})
-    from test_kernels import _frame, _params
+    from support import kernel_frame as _frame, kernel_params as _params
     from servoscope.markers import TrackerSettings, gpu
     from servoscope.markers import kernels as K
     assert gpu.cuda_available()

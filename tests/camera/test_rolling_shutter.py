@@ -29,7 +29,7 @@ from servoscope.markers.tracker import TrackerSettings, track_video
 from servoscope.simulate import PAPER_SERVO, PRESETS, FrameRenderer, Scene, simulate_campaign
 from servoscope.video.writer import rgb_to_yuv420p
 
-from test_manifest import GOOD, _tiny_video
+from support import GOOD, tiny_video as _tiny_video
 
 READOUT_S = 0.015
 FPS = 50  # a camcorder's rate: a 15 ms readout fits in its 20 ms frame interval

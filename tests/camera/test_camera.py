@@ -20,7 +20,7 @@ import pytest
 from servoscope.camera import CalibrationResult, CameraModel, calibrate, parse_board
 from servoscope.errors import ServoscopeError
 
-DATA = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "opencv-chessboard").resolve()
+from support import CHESSBOARD as DATA
 PHOTOS = sorted(DATA.glob("left*.jpg"))
 BOARD = (9, 6)
 

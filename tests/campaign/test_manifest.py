@@ -10,37 +10,7 @@ import pytest
 
 from servoscope.campaign import load_campaign
 from servoscope.errors import ServoscopeError
-
-
-def _tiny_video(path: Path, frames: int = 3) -> Path:
-    with av.open(str(path), "w") as out:
-        stream = out.add_stream("mpeg4", rate=25)
-        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
-        for i in range(frames):
-            img = np.full((48, 64, 3), 40 * i, np.uint8)
-            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(packet)
-        for packet in stream.encode():
-            out.mux(packet)
-    return path
-
-
-GOOD = """
-[markers]
-lead = "#d62728"
-trail = "green"
-led = "#ffd400"
-[[tests]]
-video = "a.mp4"
-kind = "sine"
-frequency_hz = 1.0
-amplitude = 0.1
-[[tests]]
-video = "b.mp4"
-label = "stepper"
-kind = "step"
-amplitude = 0.5
-"""
+from support import GOOD, tiny_video as _tiny_video
 
 
 @pytest.fixture

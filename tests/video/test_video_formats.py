@@ -370,7 +370,7 @@ def test_rolling_shutter_of_a_rotated_phone_video_reads_the_sensor_rows(tmp_path
     assert np.abs(turn - np.median(turn)).max() < 2e-4 and abs(abs(np.median(turn)) - np.pi / 2) < 1e-3
 
 
-CHESSBOARD = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "opencv-chessboard").resolve()
+from support import CHESSBOARD
 
 
 @pytest.mark.skipif(len(sorted(CHESSBOARD.glob("left*.jpg"))) != 13,

@@ -289,7 +289,7 @@ def test_square_and_strip_stickers_track(tmp_path, shape, half_u, half_v):
 @pytest.mark.parametrize("fields", [(0, 1), (1, 2)])
 def test_rectangle_support_numpy_and_numba_agree(fields):
     from servoscope.markers import kernels as K
-    from test_kernels import _frame, _params, _run
+    from support import kernel_frame as _frame, kernel_params as _params, run_kernel as _run
 
     i420 = _frame(1)
     params = _params(i420)

@@ -166,7 +166,7 @@ def _cli(*args):
     ('timestamp = "centre"', "camera.timestamp"),
 ])
 def test_identify_refuses_an_impossible_shutter(tmp_path, camera, expected):
-    from test_manifest import GOOD, _tiny_video
+    from support import GOOD, tiny_video as _tiny_video
 
     _tiny_video(tmp_path / "a.mp4")
     _tiny_video(tmp_path / "b.mp4")
@@ -183,7 +183,7 @@ def test_identify_refuses_an_impossible_shutter(tmp_path, camera, expected):
 
 @pytest.mark.parametrize("exposure, expected", [("0", "must be > 0"), ("0.05", "longer than the frame interval")])
 def test_track_refuses_an_impossible_shutter(tmp_path, exposure, expected):
-    from test_manifest import _tiny_video
+    from support import tiny_video as _tiny_video
 
     video = _tiny_video(tmp_path / "a.mp4")
     out = tmp_path / "t.csv"

@@ -27,7 +27,9 @@ pyMRAW = pytest.importorskip("pyMRAW")
 pims = pytest.importorskip("pims")
 tifffile = pytest.importorskip("tifffile")
 
-DATA = Path(__file__).parent / "data" / "highspeed"
+from support import DATA as _DATA
+
+DATA = _DATA / "highspeed"
 
 
 def run_cli(*args, cwd=None):

@@ -13,57 +13,9 @@ from servoscope.simulate.clips import render_clip
 from servoscope.video.reader import iter_yuv_frames
 from servoscope.video.writer import rgb_to_yuv420p
 
+from support import kernel_frame as _frame, kernel_params as _params, run_kernel as _run
+
 ENGINES = ["numpy", "numba"]
-
-
-def _frame(seed: int = 0, h: int = 96, w: int = 128) -> np.ndarray:
-    """A synthetic yuv420p frame: textured grey background, a red and a green disk (anti-aliased), noise."""
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:h, 0:w] + 0.5
-    rgb = np.empty((h, w, 3))
-    rgb[:] = (90.0, 95.0, 100.0)
-    rgb[: h // 3] = (150.0, 170.0, 200.0)  # a "sky" band
-    for (cx, cy, r, col) in ((85.3, 40.7, 9.0, (214, 39, 40)), (30.6, 52.2, 8.0, (44, 160, 44))):
-        cov = np.clip(r + 0.5 - np.hypot(xx - cx, yy - cy), 0.0, 1.0)[..., None]
-        rgb = cov * np.asarray(col, float) + (1 - cov) * rgb
-    rgb += rng.normal(0, 1.5, rgb.shape)
-    return rgb_to_yuv420p(np.clip(rgb, 0, 255).round().astype(np.uint8))
-
-
-def _params(i420: np.ndarray) -> np.ndarray:
-    from servoscope.markers.colour import ycbcr_bt601 as _bt601
-
-    rows = []
-    for rgb, (x0, y0, x1, y1), r in (((214, 39, 40), (60, 15, 115, 70), 11.0), ((44, 160, 44), (5, 25, 60, 80), 10.0)):
-        y, u, v = _bt601(rgb)
-        sat = np.hypot(u - 128, v - 128)
-        p = np.zeros(K.NP)
-        p[[K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (x0, y0, x1, y1)
-        p[[K.P.YM, K.P.UM, K.P.VM]] = (y, u, v)
-        p[[K.P.DIR_U, K.P.DIR_V]] = ((u - 128) / sat, (v - 128) / sat)
-        p[K.P.COS_TOL] = np.cos(np.radians(15))
-        p[K.P.SAT_MIN] = 0.45 * sat
-        p[K.P.AGREE] = 0.25
-        p[K.P.RADIUS] = r
-        p[K.P.RING] = 4.0
-        p[K.P.W_Y] = 1.0
-        p[K.P.ITER] = 2
-        p[K.P.ENABLED] = 1
-        p[K.P.VAR_Y] = p[K.P.VAR_C] = 2.25
-        p[K.P.ALPHA_LO], p[K.P.ALPHA_HI] = 0.0, 1.0
-        p[K.P.MIN_DEN] = 100.0
-        rows.append(p)
-    return np.array(rows)
-
-
-def _run(engine, i420, params, led, row_off=0, row_step=1):
-    h = i420.shape[0] * 2 // 3
-    y = i420[:h][row_off::row_step]
-    u, v = i420[h:].reshape(2, h // 2, -1)
-    out = np.zeros((params.shape[0], K.NQ))
-    led_out = np.zeros(K.LED_NQ)
-    K.track_frame(engine, y, u, v, row_off, row_step, params, led, out, led_out)
-    return out, led_out
 
 
 @pytest.mark.parametrize("engine", ENGINES)

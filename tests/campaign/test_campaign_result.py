@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 
 from servoscope.report import write_report  # noqa: E402
 
-SRC = Path(__file__).resolve().parents[1] / "src" / "servoscope"
+from support import SRC
 
 
 def test_the_result_module_imports_no_later_stage():
