@@ -179,3 +179,37 @@ def test_no_module_grows_past_the_limit():
     large = {m for m, n in sizes.items() if n > MAX_LINES}
     assert not (large - KNOWN_LARGE), f"split these (> {MAX_LINES} lines): {sorted(large - KNOWN_LARGE)}"
     assert not (KNOWN_LARGE - large), f"small enough now, remove from KNOWN_LARGE: {sorted(KNOWN_LARGE - large)}"
+
+
+# A function may be long when it says why: its docstring has a line "Long because …".
+MAX_FUNCTION_LINES = 80
+
+
+def _long_functions_without_a_reason(source: str) -> list[tuple[str, int]]:
+    """(name, code lines) of each function over MAX_FUNCTION_LINES lines of code (docstring not counted) with no reason."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        doc = ast.get_docstring(node)
+        first = node.body[0]
+        start = first.end_lineno + 1 if doc is not None else first.lineno
+        length = node.end_lineno - start + 1
+        if length > MAX_FUNCTION_LINES and "Long because" not in (doc or ""):
+            found.append((node.name, length))
+    return found
+
+
+def test_the_length_checker_counts_code_not_docstrings():
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION_LINES + 1))
+    assert _long_functions_without_a_reason(f"def f():\n{body}\n") == [("f", MAX_FUNCTION_LINES + 1)]
+    assert _long_functions_without_a_reason(f'def f():\n    """Long because it must."""\n{body}\n') == []
+    doc = "\n".join("    text" for _ in range(MAX_FUNCTION_LINES))
+    assert _long_functions_without_a_reason(f'def f():\n    """Short.\n{doc}\n    """\n    return 1\n') == []
+
+
+def test_long_functions_say_why():
+    unexplained = {m: found for m, p in _modules().items()
+                   if (found := _long_functions_without_a_reason(p.read_text(encoding="utf-8")))}
+    assert not unexplained, (f"functions over {MAX_FUNCTION_LINES} lines of code without 'Long because …' in their "
+                             f"docstring (split them, or say why not): {unexplained}")

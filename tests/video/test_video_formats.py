@@ -324,7 +324,7 @@ def test_twin_clip_tracks_to_its_truth_from_every_format(tmp_path, twin_frames, 
     err = np.degrees(np.angle(np.exp(1j * (track.angle_rad - truth))))
     rms = float(np.sqrt(np.mean(err ** 2)))
     print(f"{kw}: angle error RMS {rms:.4f} deg, max {np.abs(err).max():.4f} deg")
-    # As the H.264 twin's own accuracy test (tests/test_tracking.py).
+    # As the H.264 twin's own accuracy test (tests/markers/test_tracking.py).
     assert np.abs(err).max() < 0.05 and rms < 0.02
     # `servoscope track` says what it did to the frames (nothing, for plain 8-bit 4:2:0 TV BT.601).
     from click.testing import CliRunner

@@ -219,6 +219,10 @@ def calibrate(
     -----
     Deterministic: the same inputs give the same result. Views without a
     detectable board are listed in ``skipped``, not fatal.
+
+    Long because OpenCV's calibration is a sequence (find the corners, refine them,
+    calibrate, check the reprojection and the coverage, say what is wrong) whose steps
+    share the views' lists.
     """
     if isinstance(board, str):
         board = parse_board(board)

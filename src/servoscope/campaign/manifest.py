@@ -194,6 +194,9 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     ------
     ServoscopeError
         Listing every problem found, each with its location.
+
+    Long because it checks every field of the manifest in one pass and collects every
+    problem, so that a user sees them all at once; each check is a few lines.
     """
     path = Path(path)
     try:

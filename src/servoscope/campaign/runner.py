@@ -305,6 +305,9 @@ def identify(
     ------
     ServoscopeError
         When the manifest or a video is bad, or too few dwells could be fitted.
+
+    Long because it is the pipeline's order written out (exposure, input starts, dwells,
+    frequency response, model, step, warnings), each step a call to its stage.
     """
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)

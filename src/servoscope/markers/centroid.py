@@ -134,6 +134,9 @@ def soft_centroid(
     Returns
     -------
     SoftCentroid, or None when the membership sums to nothing.
+
+    Long because it is one estimator's steps (background ring, unmixing direction,
+    membership, moments, their uncertainty) on arrays they share.
     """
     h, w = rgb.shape[:2]
     marker, weight = _noise_weight(marker_pixels_rgb)

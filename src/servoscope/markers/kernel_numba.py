@@ -103,6 +103,11 @@ def _is_class(prm, uv, vv):
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
 def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
+    """One marker's soft moments in its window (compiled): parameters in ``prm`` (layout P), results in ``out`` (Q).
+
+    Long because it is one fused, compiled pass over a window's pixels: split into
+    functions, numba would keep the loops apart and the per-frame cost would grow.
+    """
     for i in range(out.shape[0]):
         out[i] = 0.0
     if prm[16] == 0.0:

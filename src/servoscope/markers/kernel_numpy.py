@@ -47,6 +47,11 @@ def classify_np(prm, uv, vv):
 
 
 def _marker_np(Y, U, V, row_off, row_step, prm, out):
+    """One marker's soft moments in its window, in plain numpy: the compiled kernel's reference.
+
+    Long because it follows the compiled kernel step for step, in the same order, so
+    that the two can be compared line by line.
+    """
     out[:] = 0.0
     if prm[P.ENABLED] == 0.0:
         return

@@ -271,7 +271,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
     found. The LED's level is measured by its own kernel on the frames where
     the markers' kernel took the slow path, else by the markers' call.
     Frames' illumination against the first's scales the learned colours
-    (:mod:`.illumination`). A long loop: its steps share the kernels'
+    (:mod:`.illumination`). Long because its steps share the kernels'
     buffers and the per-frame state, which is clearer in one place.
 
     Raises

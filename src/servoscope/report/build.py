@@ -100,6 +100,9 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     result : IdentificationResult
     figures_dir : Path, optional
         Also write every figure there as PNG and SVG.
+
+    Long because it is the report's sections in reading order, each a few lines of HTML
+    around a figure or a table built elsewhere.
     """
     fr = result.frequency_response
     model = result.model

@@ -142,6 +142,10 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         Length of the video; frames at ``i / fps < duration_s``.
     noise_seed : int
         Seed of this video's sensor noise.
+
+    Long because it renders one video's frames with every real-camera option (flicker,
+    shake, blur, rolling shutter) in one loop over frames that share the renderer's
+    state.
     """
     fps = Fraction(preset.fps).limit_denominator(1_000_000)
     n = int(math.ceil(duration_s * fps))

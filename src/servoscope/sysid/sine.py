@@ -179,6 +179,9 @@ def fit_sine(
     ServoscopeError
         Inputs of mismatched shapes, a non-positive frequency, or fewer than
         5 usable samples in the window.
+
+    Long because it is the fit's order written out (window, frequency, least squares,
+    covariance, harmonics, codec check, flags), each step a call to its module.
     """
     t_all, y_all, f_cmd, mask = _checked_inputs(time_s, y, frequency_hz, t0_s, settle_s, valid)
     warnings: list[str] = []
