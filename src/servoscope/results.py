@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["jsonable", "readonly", "import_pandas", "html_table", "html_rows"]
+__all__ = ["jsonable", "readonly", "import_pandas", "html_table", "html_rows", "fields_from_summary"]
 
 
 def jsonable(value: Any) -> Any:
@@ -55,6 +55,49 @@ def jsonable(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
+
+
+def fields_from_summary(cls: type, data: Mapping[str, Any], /, **given: Any) -> dict[str, Any]:
+    """The keyword arguments that rebuild a result dataclass from its ``summary()``, as far as it holds them.
+
+    The inverse of :func:`jsonable` on the dataclass's own fields: a field named in
+    `data` is taken from it, a list becomes a tuple where the field is a tuple (nested
+    lists too) and a read-only array where it is an array, and None becomes NaN where the
+    field is a plain ``float`` (``summary()`` writes NaN as None). Fields `data` lacks are
+    left to their defaults or to `given`, which also wins over `data`.
+
+    Parameters
+    ----------
+    cls : dataclass type
+    data : mapping
+        One object's part of a ``summary()`` (or of result.json).
+    **given
+        Fields the summary does not hold (arrays of samples, the data a fit was made from).
+
+    Returns
+    -------
+    dict
+        Keyword arguments for ``cls(**kwargs)``; private fields (``_name``) only from `given`.
+    """
+    import dataclasses
+
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.name in given:
+            out[f.name] = given[f.name]
+            continue
+        if f.name.startswith("_") or f.name not in data:
+            continue
+        value, kind = data[f.name], str(f.type)
+        if value is None:
+            out[f.name] = math.nan if kind in ("float", "np.float64") else None
+        elif "NDArray" in kind:
+            out[f.name] = readonly([math.nan if v is None else v for v in value])
+        elif kind.startswith("tuple") and isinstance(value, list):
+            out[f.name] = tuple(tuple(v) if isinstance(v, list) else v for v in value)
+        else:
+            out[f.name] = value
+    return out
 
 
 def readonly(a: ArrayLike) -> NDArray[np.float64]:

@@ -107,6 +107,16 @@ class ExposureEstimate:
     def known(self) -> bool:
         return self.value_s is not None
 
+    @classmethod
+    def from_summary(cls, data: dict) -> "ExposureEstimate":
+        """Rebuild the estimate from its :meth:`summary` (result.json's ``exposure``)."""
+        ci = data.get("ci95_s")
+        blur = data.get("blur")
+        return cls(data.get("value_s"), data.get("stderr_s"), None if ci is None else (ci[0], ci[1]),
+                   data["source"], data.get("detail", ""), data.get("frame_interval_s"),
+                   int(data.get("led_switches", 0)), int(data.get("led_switches_partly_lit", 0)),
+                   None if blur is None else BlurEvidence.from_summary(blur))
+
     def summary(self) -> dict:
         """Plain types, for result.json."""
         return {
@@ -227,7 +237,16 @@ class BlurEvidence:
             "frames": self.frames,
             "blocks": self.blocks,
             "max_speed_px_s": f(self.max_speed_px_s),
+            "frame_interval_s": self.frame_interval_s,
         }
+
+    @classmethod
+    def from_summary(cls, data: dict) -> "BlurEvidence":
+        """Rebuild the evidence from its :meth:`summary` (the blocks' sums are not in it: it cannot be pooled again)."""
+        nan = (lambda v: math.nan if v is None else float(v))
+        return cls(nan(data.get("slope_s2")), nan(data.get("slope_stderr_s2")), int(data.get("frames", 0)),
+                   int(data.get("blocks", 0)), nan(data.get("max_speed_px_s")),
+                   frame_interval_s=data.get("frame_interval_s"))
 
     def describe(self) -> str:
         """One line a person reads."""

@@ -12,12 +12,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .._io import atomic_path, write_json_atomic
 from ..camera.exposure import ExposureEstimate
 from ..markers.track import Track
 from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.model_text import model_equation
+from ..sysid.step import unit_step_function
 from .manifest import Campaign, TestSpec
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -37,6 +40,37 @@ def input_start_stderr(test: TestSpec, track: Track) -> float | None:
     """Standard uncertainty of :func:`input_start` (s): the LED's, or 0 for a t0 typed in the manifest."""
     return track.t0_uncertainty_s if test.t0_s is None else 0.0
 
+
+
+def _fit_part(model: dict) -> dict:
+    """The model's own summary from result.json's ``model``, which also holds the chosen dead time.
+
+    :meth:`IdentificationResult.summary` replaces the fit's ``dead_time_s`` (and its
+    stderr and interval) by the chosen estimate's and keeps the fit's under
+    ``dead_time_from_phase_s``: undone here.
+    """
+    fit = {k: v for k, v in model.items()
+           if k not in ("dead_time_from_phase_s", "dead_time_from_phase_stderr_s", "dead_time_source")}
+    fit["dead_time_s"] = model.get("dead_time_from_phase_s")
+    fit["dead_time_stderr_s"] = (model.get("stderr") or {}).get("dead_time_s")
+    return fit
+
+
+def _loaded_campaign(data: dict, tests: list[TestSpec], path: Path, load_campaign) -> Campaign:
+    """The campaign a saved result describes; settings from its manifest when that is still there."""
+    manifest = Path(data.get("campaign") or "")
+    base = None
+    if manifest.is_file():
+        try:
+            base = load_campaign(manifest, check_videos=False)
+        except Exception:  # a manifest changed since: the result's own description stands
+            base = None
+    skipped = tuple((s["label"], s["reason"]) for s in data.get("skipped", []))
+    if base is not None:
+        return replace(base, tests=tuple(tests), skipped=skipped)
+    return Campaign(path=manifest if data.get("campaign") else path, lead="", trail="", led=None, camera=None,
+                    exposure_s=None, input_units=data.get("input_units", ""), settle_s=math.nan,
+                    tests=tuple(tests), skipped=skipped)
 
 
 def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
@@ -228,6 +262,88 @@ class IdentificationResult:
         paths = self.write_tables(out_dir)
         paths["result"] = self.write_summary(out_dir)
         return paths
+
+    @classmethod
+    def load(cls, path: str | Path) -> "IdentificationResult":
+        """Read a result back from what :meth:`write` (or ``servoscope identify``) wrote.
+
+        Parameters
+        ----------
+        path : path-like
+            The result's ``result.json``, or the folder holding it (with its ``tracks/``).
+
+        Returns
+        -------
+        IdentificationResult
+            Its :meth:`summary` equals the file's (floats to the last bit or two: the model
+            is rebuilt from its parameters), its tracks are the CSVs' and its model is a
+            working python-control transfer function. The campaign is the one result.json
+            describes (its tests, units and the videos left out); when its manifest is
+            still where the result says, the markers' colours and the camera come from it.
+            Not in the files, so not back: the bootstrap's samples, the order comparison,
+            each dwell's covariance, the stickers' second moments, the step's prediction
+            curve (rebuilt from the model only where it is a plain rational function).
+
+        Raises
+        ------
+        ServoscopeError
+            When the file is missing, not JSON, or not a servoscope result.
+        """
+        import json
+
+        from ..errors import ServoscopeError
+        from .manifest import load_campaign
+
+        path = Path(path)
+        if path.is_dir():
+            path = path / "result.json"
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ServoscopeError(f"{path}: no such result (give the result.json that servoscope identify wrote)") from None
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ServoscopeError(f"{path}: not a servoscope result.json ({exc})") from None
+        if not isinstance(data, dict) or not {"model", "frequency_response", "tests"} <= set(data):
+            raise ServoscopeError(f"{path}: not a servoscope result.json (no model, frequency_response or tests)")
+        folder = path.parent
+        tests, tracks, fits = [], {}, {}
+        for entry in data["tests"]:
+            label = entry["label"]
+            csv = folder / "tracks" / f"{label}.csv"
+            if not csv.exists():
+                raise ServoscopeError(f"{csv}: missing; a result is read with its tracks/ folder beside result.json")
+            track = Track.from_csv(csv, video=entry["video"])
+            track.t0_s, track.t0_uncertainty_s = entry.get("t0_s"), entry.get("t0_uncertainty_s")
+            track.warnings = [w for w in entry.get("warnings", [])]
+            tracks[label] = track
+            tests.append(TestSpec(video=Path(entry["video"]), kind=entry["kind"], amplitude=entry["amplitude"],
+                                  frequency_hz=entry.get("frequency_hz"), label=label))
+            if entry.get("sine_fit") is not None:
+                sf = entry["sine_fit"]
+                track.warnings = [w for w in track.warnings if w not in sf.get("warnings", [])]
+                lo, hi = sf["window_s"]
+                inside = track.valid & (track.angle_time_s >= lo) & (track.angle_time_s <= hi)
+                fits[label] = SineFit.from_summary(sf, time_s=track.angle_time_s[inside], y=track.angle_rad[inside])
+        campaign = _loaded_campaign(data, tests, path, load_campaign)
+        fr = FrequencyResponse.from_summary(data["frequency_response"])
+        model = TransferFunctionFit.from_summary(_fit_part(data["model"]), data=fr)
+        step = None
+        if data.get("step") is not None:
+            summary = dict(data["step"])
+            label = summary.pop("label")
+            track = tracks[label]
+            unit_step = None
+            if summary.get("dead_time_s") is not None and track.n_frames > 1:
+                # The model's step shape, as analyse_step made it for the fit (same span and step).
+                t = track.angle_time_s[track.valid]
+                unit_step = unit_step_function(model.transfer_function, float(t[-1] - summary["t0_s"]) + 1.0,
+                                               float(np.median(np.diff(t))))
+            step = StepAnalysis.from_summary(summary, time_s=track.angle_time_s, y=track.angle_rad,
+                                             unit_step=unit_step)
+        exposure = None if data.get("exposure") is None else ExposureEstimate.from_summary(data["exposure"])
+        shared = (data.get("dead_time", {}).get("phase") or {}).get("shared_t0_stderr_s") or 0.0
+        return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
+                   list(data.get("warnings", [])), exposure, float(shared))
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

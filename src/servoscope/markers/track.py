@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ServoscopeError
 from .error_analysis import angle_error_analysis
 
 __all__ = ["Track"]
@@ -196,6 +197,63 @@ class Track:
         df = pd.DataFrame(self.columns())
         df["reason"] = self.reason
         return df
+
+    @classmethod
+    def from_csv(cls, path: str | Path, *, video: str | None = None) -> "Track":
+        """Read a track back from :meth:`to_csv`'s table.
+
+        Parameters
+        ----------
+        path : path-like
+            A track CSV (``tracks/<label>.csv`` of a result, or ``servoscope track``'s).
+        video : str, optional
+            The video's name (default: the CSV's stem).
+
+        Returns
+        -------
+        Track
+            The per-frame columns as written (floats to the last bit); what the table does
+            not hold (the LED's switch time, warnings, the snapshot, the stickers' second
+            moments) is left unset: a result's loader fills t0 from result.json.
+
+        Raises
+        ------
+        ServoscopeError
+            When the file is not a track table (its header lacks a column).
+        """
+        path = Path(path)
+        lines = path.read_text(encoding="utf-8").splitlines()
+        names = lines[0].split(",") if lines else []
+        need = ["frame", "time_s", "angle_rad", "valid", "lead_x_px", "lead_y_px", "trail_x_px", "trail_y_px", "reason"]
+        missing = [n for n in need if n not in names]
+        if missing:
+            raise ServoscopeError(f"{path}: not a servoscope track table (no column {', '.join(missing)})")
+        rows = [line.split(",", len(names) - 1) for line in lines[1:]]
+        cols = {n: [r[i] for r in rows] for i, n in enumerate(names)}
+
+        def num(name: str) -> np.ndarray | None:
+            if name not in cols:
+                return None
+            return np.array([float(v) if v else np.nan for v in cols[name]], dtype=np.float64)
+
+        return cls(
+            video=video or path.stem,
+            frame=np.array([int(v) for v in cols["frame"]], dtype=np.int64),
+            time_s=num("time_s"),
+            lead_xy_px=np.stack([num("lead_x_px"), num("lead_y_px")], axis=1).reshape(-1, 2),
+            trail_xy_px=np.stack([num("trail_x_px"), num("trail_y_px")], axis=1).reshape(-1, 2),
+            lead_area_px=num("lead_area_px") if "lead_area_px" in cols else np.full(len(rows), np.nan),
+            trail_area_px=num("trail_area_px") if "trail_area_px" in cols else np.full(len(rows), np.nan),
+            angle_rad=num("angle_rad"),
+            valid=np.array([v == "1" for v in cols["valid"]], dtype=bool),
+            reason=list(cols["reason"]),
+            led_level=num("led_level") if "led_level" in cols else np.full(len(rows), np.nan),
+            lead_sigma_px=num("lead_sigma_px"),
+            trail_sigma_px=num("trail_sigma_px"),
+            angle_sigma_rad=num("angle_sigma_rad"),
+            angle_time_s=num("angle_time_s"),
+            intra=None if "intra" not in cols else np.array([v == "1" for v in cols["intra"]], dtype=bool),
+        )
 
     def to_csv(self, path: str | Path) -> None:
         """Write the per-frame table (``frame,time_s,angle_rad,valid,…``)."""

@@ -179,6 +179,19 @@ class Structure:
                 der[i] = 2.0 * theta[i]
         return vals, der
 
+    def theta_from_physical(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The theta whose :meth:`physical` values are `values` (names' order): a saved fit's parameters back."""
+        theta = np.empty(len(values))
+        zc = self.offsets()["zc"]
+        for i, (kind, v) in enumerate(zip(self.kinds(), values)):
+            if kind in ("gain", "freq", "zeta"):
+                theta[i] = math.log(v)
+            elif kind == "coef":
+                theta[i] = v / self.w_ref ** -(i - zc + 1)
+            else:  # tau = u**2
+                theta[i] = math.sqrt(max(v, 0.0))
+        return theta
+
     def canonical(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
         """Sort quadratic pole factors by natural frequency (names are then unique); u >= 0."""
         th = np.array(theta, dtype=float)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import html_rows, import_pandas, jsonable
+from servoscope.results import html_rows, import_pandas, jsonable, readonly
 from servoscope.sysid.plotting import new_axes, plot_gain, plot_phase
 from servoscope.sysid.sine_result import SineFit
 
@@ -315,6 +315,24 @@ class FrequencyResponse:
             row["flags"] = " ".join(self.flags[i])
             rows.append(row)
         return rows
+
+    @classmethod
+    def from_summary(cls, rows: Sequence[dict[str, Any]], warnings: Sequence[str] = ()) -> "FrequencyResponse":
+        """Rebuild the response from its :meth:`summary` rows (a saved result.json's ``frequency_response``).
+
+        Returns
+        -------
+        FrequencyResponse
+            Its :meth:`summary` equals `rows`.
+        """
+        def col(key: str) -> NDArray[np.float64]:
+            return readonly([math.nan if r.get(key) is None else r[key] for r in rows])
+
+        return cls(frequency_hz=col("frequency_hz"), gain=col("gain"), gain_stderr=col("gain_stderr"),
+                   phase_deg=col("phase_deg"), phase_stderr_deg=col("phase_stderr_deg"), fidelity=col("fidelity"),
+                   labels=tuple(r["video"] for r in rows), frequency_stderr_hz=col("frequency_stderr_hz"),
+                   thd=col("thd"), flags=tuple(tuple(r.get("flags", "").split()) for r in rows),
+                   warnings=tuple(warnings))
 
     def summary(self) -> list[dict[str, Any]]:
         """One JSON-serializable dict per point (NaN -> None).

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from servoscope.results import html_table, import_pandas, jsonable
+from servoscope.results import fields_from_summary, html_table, import_pandas, jsonable, readonly
 from servoscope.sysid.plotting import new_axes, plot_dwell
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -185,6 +185,37 @@ class SineFit:
         t = np.asarray(time_s, dtype=float)
         theta = 2.0 * math.pi * self.frequency_hz * (t - self._center_s)
         return self.offset + self._cos_coef * np.cos(theta) + self._sin_coef * np.sin(theta)
+
+    @classmethod
+    def from_summary(cls, data: dict[str, Any], *, time_s: ArrayLike = (), y: ArrayLike = ()) -> "SineFit":
+        """Rebuild a fit from its :meth:`summary` (a dwell of a saved result.json).
+
+        Parameters
+        ----------
+        data : dict
+            What :meth:`summary` returned.
+        time_s, y : array_like, optional
+            The window's samples (the track's), for :meth:`plot` and :meth:`to_pandas`.
+
+        Returns
+        -------
+        SineFit
+            Its :meth:`summary` equals `data`. The fitted curve (:meth:`model`) is rebuilt
+            from amplitude and phase about ``t0_s``; without a known phase it is the offset
+            alone.
+        """
+        t, v = readonly(time_s), readonly(y)
+        a, phase = data.get("amplitude") or 0.0, data.get("phase_rad")
+        ref = data.get("t0_s") if data.get("t0_s") is not None else data.get("window_s", [0.0])[0]
+        known = phase is not None and data.get("t0_s") is not None
+        kw = fields_from_summary(cls, data, time_s=t, y=v, residual=readonly([]),
+                                 covariance=readonly(np.full((3, 3), np.nan)), reference_time_s=float(ref),
+                                 _center_s=float(ref), _cos_coef=a * math.sin(phase) if known else 0.0,
+                                 _sin_coef=a * math.cos(phase) if known else 0.0)
+        fit = cls(**kw)
+        if v.size:  # the residual of the samples against the rebuilt curve
+            object.__setattr__(fit, "residual", readonly(v - fit.model(t)))
+        return fit
 
     def summary(self) -> dict[str, Any]:
         """Scalar results as a JSON-serializable dict (NaN -> None)."""

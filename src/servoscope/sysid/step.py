@@ -54,7 +54,7 @@ from servoscope.errors import ServoscopeError
 from servoscope.results import readonly
 from servoscope.sysid.step_result import StepAnalysis, step_discernible
 
-__all__ = ["StepAnalysis", "analyse_step", "model_step_metrics"]
+__all__ = ["StepAnalysis", "analyse_step", "model_step_metrics", "unit_step_function"]
 
 _SETTLING_BAND = 0.02
 _RISE_LIMITS = (0.1, 0.9)
@@ -98,7 +98,7 @@ def _cubic_cross(t: NDArray[np.float64], v: NDArray[np.float64], i: int, level: 
     return float(t[i] + inside[0] * (t[i + 1] - t[i]))
 
 
-def _unit_step_function(model: control.TransferFunction, span_s: float, dt_hint_s: float) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+def unit_step_function(model: control.TransferFunction, span_s: float, dt_hint_s: float) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
     """Spline of the model's unit-step response normalized to DC gain 1 (0 for t < 0)."""
     if not isinstance(model, (control.TransferFunction, control.StateSpace)):
         raise ServoscopeError("analyse_step: model must be a control.TransferFunction")
@@ -330,7 +330,7 @@ def _dead_time_fit(
     dts = np.diff(t)
     dt_hint = float(np.median(dts)) if dts.size else 0.01
     span = float(t_end - t0) + 1.0
-    unit_step = _unit_step_function(model, span, dt_hint)
+    unit_step = unit_step_function(model, span, dt_hint)
     u = tp - t0
 
     def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:

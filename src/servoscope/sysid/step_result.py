@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from servoscope.defaults import STEP_DISCERNIBLE_SIGMA
 from servoscope.errors import ServoscopeError
-from servoscope.results import html_table, import_pandas, jsonable
+from servoscope.results import fields_from_summary, html_table, import_pandas, jsonable, readonly
 from servoscope.sysid.plotting import new_axes, plot_step
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -151,6 +151,33 @@ class StepAnalysis:
         """
         return step_discernible(self.change, self.noise_sigma)
 
+    @classmethod
+    def from_summary(cls, data: dict[str, Any], *, time_s: ArrayLike = (), y: ArrayLike = (),
+                     unit_step: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None) -> "StepAnalysis":
+        """Rebuild a step analysis from its :meth:`summary` (a saved result.json's ``step``).
+
+        Parameters
+        ----------
+        data : dict
+            What :meth:`summary` returned.
+        time_s, y : array_like, optional
+            The step video's samples (its track), for :meth:`plot` and :meth:`to_pandas`.
+        unit_step : callable, optional
+            The model's unit step response (without dead time), for :meth:`predicted`;
+            without it the analysis has no prediction curve.
+
+        Returns
+        -------
+        StepAnalysis
+            Its :meth:`summary` equals `data`.
+        """
+        change = (data.get("final_value") or 0.0) - (data.get("initial_value") or 0.0)
+        kw = fields_from_summary(cls, data, time_s=readonly(time_s), y=readonly(y), change=change,
+                                 fitted_baseline=data.get("fitted_baseline"),
+                                 predicted_metrics=None if data.get("predicted") is None else dict(data["predicted"]),
+                                 _unit_step=unit_step)
+        return cls(**kw)
+
     def summary(self) -> dict[str, Any]:
         """Scalar results as a JSON-serializable dict (NaN -> None).
 
@@ -172,6 +199,7 @@ class StepAnalysis:
                 "gain": self.gain,
                 "fitted_gain": self.fitted_gain,
                 "fitted_gain_stderr": self.fitted_gain_stderr,
+                "fitted_baseline": self.fitted_baseline,
                 "noise_sigma": self.noise_sigma,
                 "t0_s": self.t0_s,
                 "step_size": self.step_size,

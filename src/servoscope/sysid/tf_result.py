@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
-from servoscope.results import html_rows, import_pandas, jsonable
+from servoscope.results import fields_from_summary, html_rows, import_pandas, jsonable, readonly
 from servoscope.sysid._rational import Structure, continuous_phase_rad, log_response
 from servoscope.sysid._tf_metrics import bandwidth_rad_s, j_rating
 from servoscope.sysid.frequency_response import FrequencyResponse
@@ -281,8 +281,61 @@ class TransferFunctionFit:
                 "n_points": self.n_points,
                 "undetermined": list(self.undetermined),
                 "warnings": list(self.warnings),
+                # The parameters' covariance, rows and columns in `params`' order.
+                "covariance": np.asarray(self.covariance, dtype=float),
             }
         )
+
+    @classmethod
+    def from_summary(cls, summary: dict[str, Any], data: FrequencyResponse | None = None) -> "TransferFunctionFit":
+        """Rebuild a fit from its :meth:`summary` (a saved result.json's ``model``).
+
+        Parameters
+        ----------
+        summary : dict
+            What :meth:`summary` returned (the model part of result.json).
+        data : FrequencyResponse, optional
+            The points it was fitted to (for :meth:`plot` and :meth:`to_pandas`).
+
+        Returns
+        -------
+        TransferFunctionFit
+            Its :meth:`summary` equals `summary` (to the last bit or two: the model is
+            rebuilt from its parameters); the bootstrap's samples and the order
+            comparison are not in a summary.
+
+        Raises
+        ------
+        ServoscopeError
+            When the parameters do not match the model's order.
+        """
+        order = (int(summary["order"][0]), int(summary["order"][1]))
+        structure = Structure(order[0], order[1], summary["zeros"], summary["mode"] == "complex", 1.0)
+        names = structure.names()
+        params = summary.get("params") or {}
+        if sorted(params) != sorted(names):
+            raise ServoscopeError(f"model of order {order}: parameters {sorted(params)} are not {sorted(names)}")
+        theta = structure.theta_from_physical(np.array([params[n] for n in names], dtype=float))
+        cov = summary.get("covariance")
+        cov = (np.full((len(names), len(names)), np.nan) if cov is None
+               else np.array([[math.nan if v is None else v for v in row] for row in cov], dtype=float))
+
+        def nan(d: dict | None) -> dict | None:
+            return None if d is None else {k: math.nan if v is None else v for k, v in d.items()}
+
+        def pairs(d: dict | None) -> dict | None:
+            return None if d is None else {k: tuple(math.nan if x is None else x for x in v) for k, v in d.items()}
+
+        fit = summary.get("fit") or {}
+        kw = fields_from_summary(
+            cls, summary, covariance=readonly(cov), data=data, order=order, param_names=names,
+            params={n: float(params[n]) for n in names}, stderr=nan(summary.get("stderr")),
+            ci95=pairs(summary.get("ci95")), ci95_bootstrap=pairs(summary.get("ci95_bootstrap")),
+            stderr_jacobian=nan(summary.get("stderr_jacobian")), stderr_jackknife=nan(summary.get("stderr_jackknife")),
+            J=math.nan if fit.get("J") is None else fit["J"], aic=math.nan if fit.get("AIC") is None else fit["AIC"],
+            bic=math.nan if fit.get("BIC") is None else fit["BIC"], n_params=int(fit.get("n_params", len(names))),
+            n_residuals=int(fit.get("n_residuals", 0)), _structure=structure, _theta=theta)
+        return cls(**kw)
 
     def to_pandas(self) -> Any:
         """Measured vs. fitted gain (and phase) per point as a DataFrame. Needs pandas."""
