@@ -1,4 +1,4 @@
-"""Smoke test of `servoscope bench` on tiny clips (no timing assertions)."""
+"""`servoscope bench` on tiny clips: its ratios are its measurements' quotients, its targets judged (no timing assertions)."""
 
 import json
 
@@ -15,8 +15,11 @@ def test_bench_json_on_tiny_clips(tmp_path):
     out = json.loads(res.output.strip().splitlines()[-1])
     for codec in ("raw", "h264", "h264_100fps"):
         row = out["clips"][codec]
-        assert row["decode_fps"] > 0 and row["track_fps"] > 0 and row["opencv_fps"] > 0
-        assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
+        # The ratios the bench prints are the quotients of the rates it measured (each a finite rate).
+        for key in ("decode_fps", "track_fps", "opencv_fps"):
+            assert 0 < row[key] < float("inf")
+        assert row["track_over_opencv"] == pytest.approx(row["track_fps"] / row["opencv_fps"], rel=1e-12)
+        assert row["track_over_decode"] == pytest.approx(row["track_fps"] / row["decode_fps"], rel=1e-12)
         # Decoding alone is also timed at the thread count it is fastest with, and tracking compared with that.
         assert row["decode_best_threads"] in _decoder_thread_counts() and row["decode_best_fps"] > 0
         assert row["track_over_best_decode"] == row["track_fps"] / row["decode_best_fps"]
@@ -41,10 +44,15 @@ def test_bench_whole_commands_and_one_core_runs(tmp_path):
     out = json.loads(res.output.strip().splitlines()[-1])
     for codec in ("raw", "h264", "h264_100fps"):
         row = out["whole"][codec]
-        assert row["track_s"] > 0 and row["opencv_s"] > 0 and row["decode_s"] > 0
-        assert row["track_over_opencv"] > 0 and row["track_over_decode"] > 0
+        for key in ("track_s", "opencv_s", "decode_s"):
+            assert 0 < row[key] < 600
+        # Whole commands: the ratio is the baseline's time over servoscope's (a speed-up).
+        assert row["track_over_opencv"] == pytest.approx(row["opencv_s"] / row["track_s"], rel=1e-12)
+        assert row["track_over_decode"] == pytest.approx(row["decode_s"] / row["track_s"], rel=1e-12)
     par = out["parallel"]
-    assert par["one_core_fps"] > 0 and par["parallel_one_thread_fps"] > 0 and par["speedup_over_one_core"] > 0
+    assert par["videos"] == 4 and par["workers"] == 2
+    assert par["speedup"] == pytest.approx(par["parallel_fps"] / par["sequential_fps"], rel=1e-12)
+    assert par["speedup_over_one_core"] == pytest.approx(par["parallel_one_thread_fps"] / par["one_core_fps"], rel=1e-12)
     # Every target of the issue is measured by this run and judged against its threshold.
     gpu_measured = "resident_fps" in out["gpu"]
     assert [t["what"] for t in out["targets"]] == [what for what, keys, _ in TARGETS if gpu_measured or keys[0] != "gpu"]

@@ -79,6 +79,13 @@ def test_sine_fit_gives_finite_answers_or_a_clear_error(n, f_hz, amp, noise, nan
     assert math.isfinite(fit.amplitude) and fit.amplitude >= 0
     assert math.isfinite(fit.offset)
     assert fit.phase_rad is None or math.isfinite(fit.phase_rad)
+    kept = int(np.count_nonzero(np.isfinite(y)))
+    if kept >= 40 and kept / 100.0 * f_hz >= 2 and f_hz < 40 and amp > 20 * noise and amp > 1e-3:
+        # A sine that the data show well (two periods of samples, well below Nyquist, clearly
+        # above the noise) is measured within its stated uncertainty: amplitude and phase.
+        assert abs(fit.amplitude - amp) <= 5 * fit.amplitude_stderr + 1e-6 * amp, (fit.amplitude, amp)
+        if fit.phase_rad is not None:
+            assert abs(math.remainder(fit.phase_rad, 2 * math.pi)) <= 5 * fit.phase_stderr_rad + 1e-6
 
 
 @settings(max_examples=40, deadline=None)

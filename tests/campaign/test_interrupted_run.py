@@ -16,7 +16,7 @@ def _entries(cache: Path) -> dict[str, float]:
     return {p.name: p.stat().st_mtime_ns for p in cache.rglob("*.json")} if cache.exists() else {}
 
 
-def test_kill_part_way_then_resume(tmp_path, quick_campaign):
+def test_kill_part_way_then_resume(tmp_path, quick_campaign, quick_result):
     out = tmp_path / "out"
     cache = out / ".cache"
     cmd = [sys.executable, "-m", "servoscope", "identify", str(quick_campaign), "--out", str(out), "--quiet"]
@@ -42,5 +42,8 @@ def test_kill_part_way_then_resume(tmp_path, quick_campaign):
     assert len(after) == 5
     # The tracks finished before the kill were reused, not redone.
     assert all(after[name] == mtime for name, mtime in done_before.items())
+    # The resumed run's answer is the uninterrupted one's, to the bit.
     result = json.loads((out / "result.json").read_text())
-    assert len(result["frequency_response"]) == 4 and result["model"]["gain"] > 0
+    whole = json.loads(json.dumps(quick_result.summary()))
+    for key in ("model", "frequency_response", "step", "dead_time", "exposure"):
+        assert result[key] == whole[key], key
