@@ -208,10 +208,13 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
               help="Split interlaced frames into fields (double rate; 'fields' = top field first).")
 @click.option("--overlay", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the footage with the centroids, joining line and angle drawn (.mp4 or .mov).")
+@click.option("--reference", metavar="COLOUR,COLOUR",
+              help="Two stickers on the airframe: the angle is measured against the line joining them "
+                   "(takes out camera roll and shake, a phone's stabilisation, the airframe's rocking).")
 @_frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
           readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
-          **source) -> None:
+          reference: str | None, **source) -> None:
     """Track the two markers through VIDEO and write the per-frame angles.
 
     VIDEO is a video file, a folder or quoted glob of TIFF/PNG/JPEG frames
@@ -230,6 +233,16 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     led_spec = None if led.lower() == "none" else led
     if led_spec:
         parse_colour(led_spec, what="--led")
+    reference_pair = None
+    if reference is not None:
+        parts = [c.strip() for c in reference.split(",")]
+        if len(parts) != 2 or parts[0].lower() == parts[1].lower():
+            raise ServoscopeError(f"--reference {reference!r}: give two different colours, e.g. "
+                                  "--reference '#e377c2,#17becf'")
+        for part in parts:
+            if parse_colour(part, what="--reference") == "auto":
+                raise ServoscopeError("--reference: give the airframe stickers' colours, not auto")
+        reference_pair = (parts[0], parts[1])
     camera = CameraModel.load(calibration) if calibration else None
     if exposure_s is not None and not exposure_s > 0:
         raise ServoscopeError(f"{video}: --exposure must be > 0 (s), got {exposure_s}; leave it out when not known")
@@ -239,7 +252,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
-                               lead_near=lead_near, trail_near=trail_near, timestamp=timestamp)
+                               lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
+                               reference=reference_pair)
     result = track_video(video, settings)
     from .video.reader import probe_video
 
@@ -264,6 +278,12 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
+    if result.reference_angle_rad is not None:
+        import numpy as np
+
+        motion = result.reference_angle_rad[np.isfinite(result.reference_angle_rad)]
+        click.echo(f"{name}: the reference line turned by {math.degrees(float(np.ptp(motion))):.3f}° peak to peak "
+                   f"({math.degrees(float(np.std(motion))):.3f}° RMS); taken off the angle")
     if exposure_s is None:
         # The camera stage's reading of this video's shutter (a campaign pools every video's).
         from .camera.exposure import blur_evidence

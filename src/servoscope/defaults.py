@@ -14,6 +14,9 @@ LEAD_COLOUR = "#d62728"
 TRAIL_COLOUR = "#2ca02c"
 #: The input-start LED, lit.
 LED_COLOUR = "#ffd400"
+#: The twin's reference stickers on the airframe (tab:pink, tab:cyan): hues far from the blade's
+#: stickers, the LED and the background. Real campaigns name their own.
+REFERENCE_COLOURS = ("#e377c2", "#17becf")
 
 # -- sysid: when a dwell or a fit earns a warning ------------------------------------------------
 #: Sinusoidal fidelity (share of the output's AC power in the fitted sine) below this flags a

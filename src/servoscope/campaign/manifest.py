@@ -13,7 +13,7 @@ from __future__ import annotations
 import difflib
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..camera.model import CameraModel
@@ -27,7 +27,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan"}
 _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
-_MARKER_KEYS = {"lead", "trail", "led"}
+_MARKER_KEYS = {"lead", "trail", "led", "reference"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
 _TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "t0_s", "label"}
@@ -90,6 +90,9 @@ class Campaign:
     lead_near, trail_near : (float, float) or None
         A marker pinned by position (px, first frame), from
         ``lead = {colour = "#…", near = [x, y]}``; None when not pinned.
+    reference : (str, str) or None
+        Two stickers on the airframe (``[markers] reference = ["#…", "#…"]``):
+        the blade's angle is measured against the line joining them.
     """
 
     path: Path
@@ -106,6 +109,7 @@ class Campaign:
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
     timestamp: str = "middle"
+    reference: tuple[str, str] | None = None
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -122,12 +126,8 @@ class Campaign:
 
     def without(self, reasons: dict[str, str]) -> "Campaign":
         """The same campaign less some tests, each with the reason it was left out."""
-        return Campaign(
-            self.path, self.lead, self.trail, self.led, self.camera, self.exposure_s,
-            self.input_units, self.settle_s, tuple(t for t in self.tests if t.label not in reasons),
-            self.skipped + tuple(reasons.items()), readout_s=self.readout_s,
-            lead_near=self.lead_near, trail_near=self.trail_near, timestamp=self.timestamp,
-        )
+        return replace(self, tests=tuple(t for t in self.tests if t.label not in reasons),
+                       skipped=self.skipped + tuple(reasons.items()))
 
 
 class _Problems:
@@ -273,6 +273,35 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
                 if key == "led" and spec == "auto":
                     problems.add("markers.led", "must be a colour, not \"auto\"")
 
+    reference = None
+    if "reference" in markers_t:
+        # Two stickers on the airframe: the blade's angle against the line joining them.
+        ref = markers_t["reference"]
+        if not (isinstance(ref, list) and len(ref) == 2 and all(isinstance(c, str) for c in ref)):
+            problems.add("markers.reference", "two colours of stickers on the airframe: reference = [\"#rrggbb\", "
+                         "\"#rrggbb\"]")
+        else:
+            specs = []
+            for i, colour in enumerate(ref):
+                try:
+                    spec = parse_colour(colour, what="colour")
+                except ServoscopeError as exc:
+                    problems.add(f"markers.reference[{i}]", str(exc).removeprefix("colour: "))
+                    continue
+                if spec == "auto":
+                    problems.add(f"markers.reference[{i}]", "must be a colour, not \"auto\"")
+                specs.append(spec)
+            taken = {k: colours.get(k) for k in ("lead", "trail", "led")}
+            if len(specs) == 2 and specs[0] == specs[1]:
+                problems.add("markers.reference", "the two reference stickers need two colours (the line joining "
+                             "them is told apart by them)")
+            for i, colour in enumerate(ref):
+                same = [k for k, c in taken.items() if isinstance(c, str) and c.lower() == colour.lower()]
+                if same:
+                    problems.add(f"markers.reference[{i}]", f"{colour} is also the {same[0]}'s colour: give the "
+                                 "airframe's stickers colours of their own")
+            reference = (str(ref[0]), str(ref[1]))
+
     input_t = problems.table(data, "input")
     problems.unknown("input", input_t.keys(), _INPUT_KEYS)
     units = input_t.get("units", "normalized")
@@ -412,4 +441,5 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         lead_near=near["lead"],
         trail_near=near["trail"],
         timestamp=str(timestamp),
+        reference=reference,
     )

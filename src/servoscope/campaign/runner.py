@@ -44,6 +44,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         lead_near=campaign.lead_near,
         trail_near=campaign.trail_near,
         timestamp=campaign.timestamp,
+        reference=campaign.reference,
     )
 
 

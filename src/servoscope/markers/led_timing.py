@@ -113,6 +113,32 @@ def frame_period_s(time_s: np.ndarray) -> float:
     return float(np.median(np.diff(time_s))) if np.size(time_s) > 1 else 0.0
 
 
+#: Settled frames on each side of the switch whose median sets the lit and dark levels there.
+LOCAL_LEVEL_FRAMES = 3
+
+
+def _local_levels(level: np.ndarray, k: int) -> np.ndarray:
+    """The levels rescaled so that the lit and dark frames next to the switch at ``k`` read 1 and 0.
+
+    The video's own 0 and 1 are its first and last frames'. What the LED's disk
+    shows drifts: a camera that rolls or shakes, a blade that moves it across the
+    pixel grid, lamps that dim. The switch is measured against the levels around
+    it (the median of :data:`LOCAL_LEVEL_FRAMES` settled frames each side, not the
+    frame next to the switch, which may be the partly lit one): a camera rolling
+    ±0.5° at 3 Hz read the lit LED 2 % bright there and put t0 0.27 ms late,
+    stated ±0.06 ms. Without enough settled frames the levels are left as they are.
+    """
+    ok = np.isfinite(level)
+    before = [j for j in range(k - 2, -1, -1) if ok[j]][:LOCAL_LEVEL_FRAMES]
+    after = [j for j in range(k + 1, level.size) if ok[j]][:LOCAL_LEVEL_FRAMES]
+    if len(before) < LOCAL_LEVEL_FRAMES or len(after) < LOCAL_LEVEL_FRAMES:
+        return level
+    on, off = float(np.median(level[before])), float(np.median(level[after]))
+    if not on - off > 0.5:
+        return level
+    return (level - off) / (on - off)
+
+
 def led_level_noise(level: np.ndarray, k: int) -> float:
     """Robust standard deviation of the LED level in the settled frames away from the switch at ``k``.
 
@@ -191,6 +217,7 @@ def led_switch_time(time_s: np.ndarray, level: np.ndarray,
     k = int(first_off[0])
     if k < 1:
         return None, "LED not lit in the first frame: no input start found"
+    level = _local_levels(level, k)
     period = frame_period_s(time_s)
     noise = led_level_noise(level, k)
     band = 3.0 * noise

@@ -86,6 +86,12 @@ class TrackerSettings:
         With a known exposure, angles and t0 are dated at the exposures'
         middles; the phases and the dead time do not depend on it (the LED
         and the markers share each frame's exposure).
+    reference : (str, str) or None
+        Two stickers on the airframe (colours as ``lead``/``trail``): the
+        blade's angle is measured against the line joining them, which takes
+        out camera roll and shake, a phone's stabilisation and the airframe's
+        own rocking (:attr:`Track.reference_angle_rad` keeps that line's
+        motion). None (the default): against the image's axes.
     """
 
     lead: str = LEAD_COLOUR
@@ -104,6 +110,7 @@ class TrackerSettings:
     timestamp: str = "middle"
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
+    reference: tuple[str, str] | None = None
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")

@@ -71,6 +71,11 @@ class Track:
         NaN where not found. Motion during the exposure stretches them along
         the motion: the evidence of the shutter that
         :func:`servoscope.camera.exposure.blur_evidence` reads.
+    reference_angle_rad : ndarray or None
+        With reference stickers on the airframe (``TrackerSettings.reference``):
+        the angle of the line joining them, less its median (rad; NaN where not
+        measured): the picture's own rotation, already taken off ``angle_rad``.
+        None without reference stickers.
     intra : ndarray of bool or None
         Frames the codec coded on their own (I-frames; every frame of
         uncompressed video); None when unknown. ``fit_sine`` checks the
@@ -104,6 +109,7 @@ class Track:
     led_partial_frames: int | None = None
     lead_shape_px2: np.ndarray | None = None
     trail_shape_px2: np.ndarray | None = None
+    reference_angle_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -186,6 +192,7 @@ class Track:
             "led_level": self.led_level,
             "angle_time_s": self.angle_time_s,
             **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
+            **({} if self.reference_angle_rad is None else {"reference_angle_rad": self.reference_angle_rad}),
         }
 
     def to_pandas(self):
@@ -253,6 +260,7 @@ class Track:
             angle_sigma_rad=num("angle_sigma_rad"),
             angle_time_s=num("angle_time_s"),
             intra=None if "intra" not in cols else np.array([v == "1" for v in cols["intra"]], dtype=bool),
+            reference_angle_rad=num("reference_angle_rad"),
         )
 
     def to_csv(self, path: str | Path) -> None:

@@ -23,6 +23,7 @@ advance.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -112,7 +113,52 @@ def track_video(
         run_yuv(job, engine, log)
     if progress is not None:
         progress(len(log))
-    return _finish(path, settings, info, fields, led_spec, log)
+    track = _finish(path, settings, info, fields, led_spec, log)
+    if settings.reference is not None:
+        track = _against_reference(path, settings, track)
+    return track
+
+
+def _as_reference(text: str) -> str:
+    """A message about the reference pass's markers, named as the user named them."""
+    return (text.replace("the lead marker", "the first reference marker")
+            .replace("the trail marker", "the second reference marker")
+            .replace("lead marker", "first reference marker").replace("trail marker", "second reference marker")
+            .replace("LED", "LED (not used for the reference)"))
+
+
+def _against_reference(path: Path, settings: TrackerSettings, track: Track) -> Track:
+    """The blade's angle against the line joining two stickers on the airframe.
+
+    The reference stickers are tracked by a second pass over the video, as a pair
+    of markers of their own (colour models, sub-pixel moments, rigid check); the
+    line's angle, less its median, is the picture's own rotation (camera roll, a
+    phone's stabilisation, the airframe rocking), taken off the blade's angle frame
+    by frame. A frame is valid when both pairs are; the angle's uncertainty adds
+    both lines'. The reference line is taken at the blade's sample times (no
+    rolling-shutter correction of its own rows).
+    """
+    lead_ref, trail_ref = settings.reference
+    ref_settings = replace(settings, lead=lead_ref, trail=trail_ref, led=None, reference=None, lead_near=None,
+                           trail_near=None)
+    try:
+        ref = track_video(path, ref_settings)
+    except ServoscopeError as exc:
+        raise ServoscopeError(_as_reference(str(exc))) from None
+    if ref.n_frames != track.n_frames:  # pragma: no cover - one decoder, one video
+        raise ServoscopeError(f"{path}: the reference pass decoded {ref.n_frames} frames, the blade's {track.n_frames}")
+    if ref.n_valid == 0:
+        why = "; ".join(_as_reference(w) for w in ref.warnings) or "no frame has both"
+        raise ServoscopeError(f"{path}: the reference stickers ({lead_ref}, {trail_ref}) were not measured in any "
+                              f"frame ({why}); check their colours with `servoscope markers`")
+    motion = ref.angle_rad - float(np.median(ref.angle_rad[ref.valid]))
+    valid = track.valid & ref.valid
+    reasons = [r or ("" if ok else "reference: " + _as_reference(rr or "not measured"))
+               for r, ok, rr in zip(track.reason, ref.valid, ref.reason)]
+    warnings = list(track.warnings) + [f"reference: {_as_reference(w)}" for w in ref.warnings]
+    return replace(track, angle_rad=np.where(valid, track.angle_rad - motion, np.nan), valid=valid, reason=reasons,
+                   angle_sigma_rad=np.hypot(track.angle_sigma_rad, ref.angle_sigma_rad), warnings=warnings,
+                   reference_angle_rad=np.where(ref.valid, motion, np.nan))
 
 
 def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str | None, led_spec,

@@ -288,9 +288,18 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                 "Error analysis",
                 name="error_analysis",
             )
+        with_reference = any(t.get("reference_motion_rad") for t in summary["tests"])
+
+        def turned(t: dict) -> str:
+            m = t.get("reference_motion_rad")
+            return "—" if not m else (f"{math.degrees(m['peak_to_peak']):.3f}° p-p, "
+                                      f"{math.degrees(m['rms']):.3f}° RMS")
+
         s.table(
-            ["video", "frames", "valid", "t0 (s)", "warnings"],
-            [[t["video"], t["frames"], t["valid_frames"], t["t0_s"], "; ".join(t["warnings"]) or "—"] for t in summary["tests"]],
+            ["video", "frames", "valid", "t0 (s)"] + (["reference line turned (taken off)"] if with_reference else [])
+            + ["warnings"],
+            [[t["video"], t["frames"], t["valid_frames"], t["t0_s"]] + ([turned(t)] if with_reference else [])
+             + ["; ".join(t["warnings"]) or "—"] for t in summary["tests"]],
         )
         sections.append(s)
 

@@ -23,7 +23,8 @@ from ..video.sequence_writer import TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
-from .scene import Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
+from ..defaults import REFERENCE_COLOURS
+from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
 from .._io import write_text_atomic
 
@@ -185,6 +186,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     flicker = preset.flicker_depth > 0 and preset.flicker_hz > 0
     phase = preset.flicker_phase_rad or 0.0
     shake = _shake_px(preset, n, noise_seed)
+    roll = preset.roll_rad * np.sin(2.0 * np.pi * preset.roll_hz * time_s)
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     if preset.frames_format is not None:
         writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
@@ -204,11 +206,11 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                 sub_led = led_exposure_fraction(sub_t, signal.t0_s, sub_dt)
                 sub_gain = (lamp_gain(sub_t, sub_dt, preset.flicker_hz, preset.flicker_depth, phase)
                             if flicker else None)
-                writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i])))
+                writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i]), float(roll[i])))
             else:
                 gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth,
                                        phase)) if flicker else 1.0
-                writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i])))
+                writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]), float(roll[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -226,9 +228,24 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         "led_level": led.tolist(),
         **rolling,
         **({"shake_xy_px": shake.tolist()} if preset.shake_px > 0 else {}),
+        **({"roll_rad": roll.tolist()} if preset.roll_rad != 0 else {}),
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
+
+
+def reference_stickers(scene: Scene) -> tuple[Clutter, Clutter]:
+    """The airframe's two reference stickers: discs in the image's lower corners, far apart.
+
+    Colours :data:`servoscope.defaults.REFERENCE_COLOURS`, diameter 1.3× the blade's stickers,
+    centres 8 % of the width in from the sides and 10 % of the height up from the bottom:
+    clear of the blade's swing, with a line as long as the blade stickers' so that it turns
+    no less precisely.
+    """
+    d = 1.3 * scene.sticker_diameter_px
+    y = 0.9 * scene.height
+    return (Clutter(REFERENCE_COLOURS[0], (0.92 * scene.width, y), (d, d), shape="disc"),
+            Clutter(REFERENCE_COLOURS[1], (0.08 * scene.width, y), (d, d), shape="disc"))
 
 
 def _shake_px(preset: CampaignPreset, n: int, noise_seed: int) -> np.ndarray:
@@ -326,6 +343,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         scene = replace(p.scene, **scene_kw) if scene_kw else p.scene
     else:
         scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
+    if p.reference_stickers:
+        scene = replace(scene, clutter=tuple(scene.clutter) + reference_stickers(scene))
     camera = p.camera()
 
     out = Path(outdir)
@@ -394,7 +413,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             # Real-camera options, only when set (default truth unchanged).
             **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
-                                          "frames_format")
+                                          "frames_format", "roll_rad", "roll_hz", "reference_stickers")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
@@ -420,6 +439,8 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
         f"lead = {_toml_str(scene.lead_colour)}",
         f"trail = {_toml_str(scene.trail_colour)}",
         f"led = {_toml_str(scene.led_colour)}",
+        *([f"reference = [{_toml_str(REFERENCE_COLOURS[0])}, {_toml_str(REFERENCE_COLOURS[1])}]"]
+          if p.reference_stickers else []),
         "",
         "[input]",
         f"units = {_toml_str(p.input_units)}",

@@ -120,6 +120,18 @@ class CampaignPreset:
     timestamp_at : {"middle", "start", "end"}
         Which instant of the exposure the written frame timestamp marks
         (campaign.toml ``[camera] timestamp`` says it when not "middle").
+    roll_rad, roll_hz : float
+        A camera that rolls (or a phone's stabilisation that turns the
+        picture): the whole recorded picture turns about its centre by
+        ``roll_rad·sin(2π·roll_hz·t)``, counter-clockwise positive as angles
+        are counted, constant over an exposure; truth's ``angle_rad`` stays the
+        blade's against the airframe and ``roll_rad`` per frame says the
+        picture's. 0 (the default): a steady camera. Global shutter only.
+    reference_stickers : bool
+        Two stickers on the airframe (the image's lower corners, colours
+        :data:`servoscope.defaults.REFERENCE_COLOURS`, 1.3× the blade's), which
+        campaign.toml names as ``[markers] reference``: the blade's angle is then
+        measured against the line joining them.
     frames_format : {None, "tiff16"}
         Write each test as a folder of frames instead of a video (the
         manifest then says ``frames`` and ``fps``): ``"tiff16"``, 16-bit RGB
@@ -165,6 +177,9 @@ class CampaignPreset:
     blur_max_samples: int = 32
     timestamp_at: str = "middle"
     frames_format: str | None = None
+    roll_rad: float = 0.0
+    roll_hz: float = 3.0
+    reference_stickers: bool = False
 
     def __post_init__(self) -> None:
         self._check_camera_options()
@@ -209,10 +224,15 @@ class CampaignPreset:
             raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
         if self.frames_format not in (None, "tiff16"):
             raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
+        if not (math.isfinite(self.roll_rad) and math.isfinite(self.roll_hz) and self.roll_hz > 0
+                and abs(self.roll_rad) < 0.5):
+            raise ServoscopeError(f"roll_rad must be finite and under 0.5 rad, roll_hz > 0 (got {self.roll_rad!r}, "
+                                  f"{self.roll_hz!r})")
         if self.readout_s > 0:
             # The row-by-row renderer draws one pose per row; blur would need
-            # sub-exposures per row, shake a per-row shift of the background.
-            unsupported = [name for name, on in (("motion_blur", self.motion_blur), ("shake_px", self.shake_px > 0))
+            # sub-exposures per row, shake (and roll) a per-row move of the background.
+            unsupported = [name for name, on in (("motion_blur", self.motion_blur), ("shake_px", self.shake_px > 0),
+                                                 ("roll_rad", self.roll_rad != 0))
                            if on]
             if unsupported:
                 raise ServoscopeError(f"{' and '.join(unsupported)} cannot be combined with a rolling shutter "

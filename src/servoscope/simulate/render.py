@@ -27,6 +27,7 @@ about ±4.3 sigma, irrelevant after rounding to 8 bits.
 from __future__ import annotations
 
 import functools
+import math
 
 from dataclasses import replace
 
@@ -298,15 +299,32 @@ def polygon_coverage(vertices_xy_px: np.ndarray, image_size: tuple[int, int] | N
 def _background(scene: Scene) -> np.ndarray:
     # Campaigns render many videos of one scene: build its background once.
     bg = scene.background()
-    _draw_clutter(bg, scene, np.zeros(2))
+    _draw_clutter(bg, scene, None)
     bg.flags.writeable = False
     return bg
 
 
-def _draw_clutter(image: np.ndarray, scene: Scene, shift_px: np.ndarray) -> None:
-    """Composite the scene's static clutter, shifted by ``shift_px``, into ``image`` (float32 RGB)."""
+def picture_motion(scene: Scene, shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
+    """The 2×3 map of the whole recorded picture: a roll about its centre, then a shift (camera motion).
+
+    ``roll_rad`` turns the picture counter-clockwise as seen (y down), the sense in which
+    :func:`servoscope.simulate.scene.marker_angle_rad` counts angles: a rolled camera adds
+    the roll to every angle it sees.
+    """
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    cx, cy = 0.5 * (scene.width - 1), 0.5 * (scene.height - 1)
+    return np.array([[c, s, cx - c * cx - s * cy + shift_px[0]],
+                     [-s, c, cy + s * cx - c * cy + shift_px[1]]])
+
+
+def _moved(xy: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
+    return xy if motion is None else xy @ motion[:, :2].T + motion[:, 2]
+
+
+def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None) -> None:
+    """Composite the scene's static clutter, moved by the picture's ``motion`` (2×3), into ``image`` (float32 RGB)."""
     for item in scene.clutter:
-        acc, x0, y0, sign = _accumulated(item.outline_px() + shift_px, scene.width, scene.height)
+        acc, x0, y0, sign = _accumulated(_moved(item.outline_px(), motion), scene.width, scene.height)
         if acc.shape[0] > 0 and acc.shape[1] > 1:
             _composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
 
@@ -383,27 +401,26 @@ class FrameRenderer:
             xy = self.camera.distort_points(xy)
         return np.split(xy, self._splits)
 
-    def _restore_lit(self, gain: np.ndarray | float, shift_px: tuple[float, float]) -> None:
-        """Fill the whole working buffer with the background, shifted and scaled by the lamps' gain."""
+    def _restore_lit(self, gain: np.ndarray | float, motion: np.ndarray | None) -> None:
+        """Fill the whole working buffer with the background, moved (2×3 map) and scaled by the lamps' gain."""
         h, w = self.scene.height, self.scene.width
         g = np.asarray(gain, dtype=np.float32)
-        if shift_px == (0.0, 0.0):
+        if motion is None:
             np.multiply(self._bg, g.reshape(-1, 1, 1) if g.ndim else g, out=self._work)
         else:
             # The plain background is smooth (blotches tenths of the image
-            # wide): cubic interpolation shifts it to ~1e-3 DN. Clutter has
+            # wide): cubic interpolation moves it to ~1e-3 DN. Clutter has
             # sharp edges, which interpolation would not move exactly: it is
-            # drawn again, shifted, with exact coverage.
-            m = np.array([[1.0, 0.0, shift_px[0]], [0.0, 1.0, shift_px[1]]])
+            # drawn again, moved, with exact coverage.
             plain = _background(replace(self.scene, clutter=()))
-            self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), m, (w, h), flags=cv2.INTER_CUBIC,
+            self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), motion, (w, h), flags=cv2.INTER_CUBIC,
                                            borderMode=cv2.BORDER_REFLECT)
-            _draw_clutter(self._work, self.scene, np.array(shift_px))
+            _draw_clutter(self._work, self.scene, motion)
             self._work *= g
         self._dirty = [(0, h, 0, w)]
 
     def composite(self, pitch_rad: float, led_level: float, lamp_gain: float = 1.0,
-                  shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+                  shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
         """The noise-free frame, float32 DN, shape (height, width, 3).
 
         The returned array is the renderer's working buffer: copy it before
@@ -421,13 +438,17 @@ class FrameRenderer:
             moves over the cached background.
         shift_px : (float, float)
             Translation of the whole picture, recorded pixels (camera shake).
+        roll_rad : float
+            Rotation of the whole picture about its centre (a camera that rolls, a
+            phone's stabilisation), see :func:`picture_motion`.
         """
         if not 0.0 <= led_level <= 1.0:
             raise ServoscopeError(f"led_level must be in [0, 1], not {led_level}")
         shift_px = (float(shift_px[0]), float(shift_px[1]))
-        lit = lamp_gain != 1.0 or shift_px != (0.0, 0.0)
+        motion = None if shift_px == (0.0, 0.0) and roll_rad == 0.0 else picture_motion(self.scene, shift_px, roll_rad)
+        lit = lamp_gain != 1.0 or motion is not None
         if lit:
-            self._restore_lit(lamp_gain, shift_px)
+            self._restore_lit(lamp_gain, motion)
             # The dark LED is seen by the lamps' light; a lit one shines its own.
             led_colour = led_level * self._led_on + (1.0 - led_level) * lamp_gain * self._led_off
             colours = [c * lamp_gain for c in self._colours] + [led_colour]
@@ -439,8 +460,8 @@ class FrameRenderer:
             colours = self._colours + [led_colour]
         w, h = self.scene.width, self.scene.height
         outlines = self.outlines_px(pitch_rad)
-        if shift_px != (0.0, 0.0):
-            outlines = [xy + np.array(shift_px) for xy in outlines]
+        if motion is not None:
+            outlines = [_moved(xy, motion) for xy in outlines]
         for xy, colour in zip(outlines, colours):
             acc, x0, y0, sign = _accumulated(xy, w, h)
             ny, nx = acc.shape[0], acc.shape[1] - 1
@@ -494,7 +515,7 @@ class FrameRenderer:
             gain = np.asarray(row_lamp_gain, dtype=np.float64)
             if gain.shape != (h,) or not np.all(np.isfinite(gain)):
                 raise ServoscopeError(f"composite_rolling: need one finite lamp gain per row ({h})")
-            self._restore_lit(gain, (0.0, 0.0))
+            self._restore_lit(gain, None)
             row_colours = [gain[:, None] * c[None, :] for c in self._colours]
             row_colours.append(level[:, None] * self._led_on[None, :]
                                + ((1.0 - level) * gain)[:, None] * self._led_off[None, :])
@@ -552,7 +573,7 @@ class FrameRenderer:
         return out
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,
-               shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+               shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
         """One recorded frame: composite, add seeded noise, round to uint8.
 
         Parameters
@@ -563,18 +584,19 @@ class FrameRenderer:
             Fraction of the exposure during which the LED was lit, in [0, 1].
         frame_index : int
             Index of the frame (selects its noise).
-        lamp_gain, shift_px : float, (float, float)
-            Lamps' flicker and camera shake, see :meth:`composite`.
+        lamp_gain, shift_px, roll_rad : float, (float, float), float
+            Lamps' flicker, camera shake and roll, see :meth:`composite`.
 
         Returns
         -------
         ndarray of uint8, shape (height, width, 3)
             RGB frame.
         """
-        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px), frame_index)
+        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px, roll_rad), frame_index)
 
     def render_blurred(self, pitch_rad: np.ndarray, led_lit: np.ndarray, frame_index: int = 0,
-                       lamp_gain: np.ndarray | None = None, shift_px: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+                       lamp_gain: np.ndarray | None = None, shift_px: tuple[float, float] = (0.0, 0.0),
+                       roll_rad: float = 0.0) -> np.ndarray:
         """One recorded frame with real motion blur: the mean of sub-exposure composites.
 
         A sensor integrates the moving blade: sampling the exposure at
@@ -594,6 +616,8 @@ class FrameRenderer:
             The lamps' light in each sub-interval; None: steady.
         shift_px : (float, float)
             Camera shake (the same throughout the exposure).
+        roll_rad : float
+            Camera roll (the same throughout the exposure).
 
         Returns
         -------
@@ -606,7 +630,7 @@ class FrameRenderer:
             raise ServoscopeError("render_blurred: need one pitch, LED level and lamp gain per sample")
         total = np.zeros((self.scene.height, self.scene.width, 3), dtype=np.float64)
         for p, level, g in zip(pitch, lit, gain):
-            total += self.composite(float(p), float(level), float(g), shift_px)
+            total += self.composite(float(p), float(level), float(g), shift_px, roll_rad)
         return self._finished((total / pitch.size).astype(np.float32), frame_index)
 
 
