@@ -117,8 +117,12 @@ def frame_period_s(time_s: np.ndarray) -> float:
 LOCAL_LEVEL_FRAMES = 3
 
 
-def _local_levels(level: np.ndarray, k: int) -> np.ndarray:
-    """The levels rescaled so that the lit and dark frames next to the switch at ``k`` read 1 and 0.
+#: What measuring against the levels beside the switch does to the level's noise (see above).
+LOCAL_LEVEL_NOISE_FACTOR = 1.45
+
+
+def _local_levels(level: np.ndarray, k: int, noise: float) -> np.ndarray | None:
+    """The levels rescaled so that the lit and dark frames next to the switch at ``k`` read 1 and 0; None when they do.
 
     The video's own 0 and 1 are its first and last frames'. What the LED's disk
     shows drifts: a camera that rolls or shakes, a blade that moves it across the
@@ -126,16 +130,18 @@ def _local_levels(level: np.ndarray, k: int) -> np.ndarray:
     it (the median of :data:`LOCAL_LEVEL_FRAMES` settled frames each side, not the
     frame next to the switch, which may be the partly lit one): a camera rolling
     ±0.5° at 3 Hz read the lit LED 2 % bright there and put t0 0.27 ms late,
-    stated ±0.06 ms. Without enough settled frames the levels are left as they are.
+    stated ±0.06 ms. Only when they differ from 1 and 0 by more than the median of
+    three frames' noise allows (3 × 1.25σ/√3): steady footage is measured as before.
     """
     ok = np.isfinite(level)
     before = [j for j in range(k - 2, -1, -1) if ok[j]][:LOCAL_LEVEL_FRAMES]
     after = [j for j in range(k + 1, level.size) if ok[j]][:LOCAL_LEVEL_FRAMES]
     if len(before) < LOCAL_LEVEL_FRAMES or len(after) < LOCAL_LEVEL_FRAMES:
-        return level
+        return None
     on, off = float(np.median(level[before])), float(np.median(level[after]))
-    if not on - off > 0.5:
-        return level
+    allowed = 3.0 * 1.25 * noise / math.sqrt(LOCAL_LEVEL_FRAMES)
+    if not on - off > 0.5 or (abs(on - 1.0) <= allowed and abs(off) <= allowed):
+        return None
     return (level - off) / (on - off)
 
 
@@ -217,9 +223,14 @@ def led_switch_time(time_s: np.ndarray, level: np.ndarray,
     k = int(first_off[0])
     if k < 1:
         return None, "LED not lit in the first frame: no input start found"
-    level = _local_levels(level, k)
     period = frame_period_s(time_s)
     noise = led_level_noise(level, k)
+    local = _local_levels(level, k, noise)
+    if local is not None:
+        # Against levels measured on 3 frames a side: their own error (the median of 3,
+        # 1.25σ/√3 each) enters every level; at most √2 more in t0's σ, stated.
+        level = local
+        noise = LOCAL_LEVEL_NOISE_FACTOR * max(noise, led_level_noise(level, k))
     band = 3.0 * noise
     t_before, t_after = float(time_s[k - 1]), float(time_s[k])
     regular = abs((t_after - t_before) - period) < 0.01 * period
