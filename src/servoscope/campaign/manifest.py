@@ -252,13 +252,22 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         # A marker pinned by position, as a user clicks a point: {colour = "#…", near = [x, y]}.
         entry = markers_t.get(key)
         if isinstance(entry, dict):
-            unknown = set(entry) - {"colour", "near"}
-            if unknown or "colour" not in entry or "near" not in entry:
-                problems.add(f"markers.{key}", "a pinned marker is {colour = \"#rrggbb\", near = [x, y]}, "
+            # A marker told by brightness (monochrome footage) names it instead of a colour.
+            unknown = set(entry) - {"colour", "brightness", "near"}
+            kind = [k for k in ("colour", "brightness") if k in entry]
+            if unknown or len(kind) != 1 or ("near" not in entry and kind != ["brightness"]):
+                problems.add(f"markers.{key}", "a pinned marker is {colour = \"#rrggbb\", near = [x, y]} (or "
+                             "{brightness = \"bright\", near = [x, y]} on monochrome footage), "
                              f"got keys {sorted(entry)}")
                 colours[key] = None
                 continue
-            colours[key] = entry["colour"]
+            colours[key] = entry[kind[0]]
+            if kind == ["brightness"] and str(entry["brightness"]).lower() not in ("bright", "dark"):
+                problems.add(f"markers.{key}.brightness", f"{entry['brightness']!r}: \"bright\" or \"dark\"")
+                colours[key] = None
+                continue
+            if "near" not in entry:
+                continue
             try:
                 near[key] = check_near(entry["near"], what="near")
             except ServoscopeError as exc:

@@ -14,17 +14,22 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["AUTO", "parse_colour", "ColourModel", "hsv_of_rgb", "ycbcr_bt601"]
+__all__ = ["AUTO", "BRIGHT", "BRIGHTNESS", "DARK", "BrightnessModel", "parse_colour", "ColourModel", "hsv_of_rgb",
+           "luma_bt601", "ycbcr_bt601"]
 
 AUTO = "auto"
+#: Markers told by brightness rather than colour (monochrome footage): white dots on a dark
+#: blade ("bright") or dark dots on a light one ("dark").
+BRIGHT, DARK = "bright", "dark"
+BRIGHTNESS = (BRIGHT, DARK)
 
 
 def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, float] | str:
-    """Parse ``"#rrggbb"``, a CSS colour name or ``"auto"``.
+    """Parse ``"#rrggbb"``, a CSS colour name, ``"auto"``, or a brightness (``"bright"``, ``"dark"``).
 
     Returns
     -------
-    (r, g, b) in 0–255, or the string ``"auto"``.
+    (r, g, b) in 0–255, or the string ``"auto"``, ``"bright"`` or ``"dark"``.
 
     Raises
     ------
@@ -34,8 +39,8 @@ def parse_colour(spec: str, *, what: str = "colour") -> tuple[float, float, floa
     if not isinstance(spec, str):
         raise ServoscopeError(f"{what}: expected a colour string like \"#d62728\", \"red\" or \"auto\", got {spec!r}")
     text = spec.strip().lower()
-    if text == AUTO:
-        return AUTO
+    if text in (AUTO, *BRIGHTNESS):
+        return text
     if text.startswith("#"):
         # Hex is parsed here: importing matplotlib for it would cost 0.2 s of
         # every `servoscope track`'s start-up.
@@ -125,9 +130,72 @@ class ColourModel:
         rgb = tuple(float(c) for c in np.median(np.asarray(pixels_rgb, dtype=np.float64).reshape(-1, 3), axis=0))
         return cls(rgb, float(hue), halfwidth, max(30.0, 0.45 * s_med), max(25.0, 0.35 * v_med))
 
+    def learned(self, pixels_rgb: np.ndarray) -> "ColourModel":
+        """The band fitted to a detected marker's core pixels (:meth:`learn`)."""
+        return ColourModel.learn(pixels_rgb)
+
     def mask(self, rgb: np.ndarray) -> np.ndarray:
         """Binary membership of RGB uint8 pixels, shape (..., 3) → (...) bool."""
         hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV) if rgb.ndim == 3 else hsv_of_rgb(rgb)
         h = hsv[..., 0].astype(np.int16)
         dh = np.abs(((h - int(round(self.hue)) + 90) % 180) - 90)
         return (dh <= self.hue_halfwidth) & (hsv[..., 1] >= self.min_saturation) & (hsv[..., 2] >= self.min_value)
+
+
+def luma_bt601(rgb: np.ndarray) -> np.ndarray:
+    """BT.601 luma (0–255) of RGB pixels, shape (..., 3) → (...): a gray frame's own level."""
+    a = np.asarray(rgb, dtype=np.float32)
+    return a[..., 0] * np.float32(0.299) + a[..., 1] * np.float32(0.587) + a[..., 2] * np.float32(0.114)
+
+
+@dataclass(frozen=True)
+class BrightnessModel:
+    """A marker told by its brightness: the level above (or below) which a pixel is the marker's.
+
+    Monochrome footage (most high-speed cameras) has no colour to tell stickers by:
+    white dots on a dark blade are the brightest blobs of the frame. The threshold sits
+    halfway between the frame's typical level (its median) and the extreme level of
+    the markers (the 99.9th percentile, or the 0.1th for dark markers); the sub-pixel
+    moments then unmix each pixel between the marker's level and the local
+    background's, as for colours (:mod:`.centroid`).
+
+    Attributes
+    ----------
+    rgb : (r, g, b)
+        The marker's level (gray: three equal values).
+    bright : bool
+        True: the marker is brighter than what surrounds it; False: darker.
+    threshold_dn : float
+        Luma (0–255) that separates it.
+    hue : float
+        0: brightness markers have no hue (the candidates' hue test is moot).
+    """
+
+    rgb: tuple[float, float, float]
+    bright: bool
+    threshold_dn: float
+    hue: float = 0.0
+
+    @classmethod
+    def from_frame(cls, rgb: np.ndarray, spec: str) -> "BrightnessModel":
+        """The threshold for ``spec`` ("bright" or "dark") from a frame's levels."""
+        y = luma_bt601(rgb).ravel()
+        typical = float(np.median(y))
+        extreme = float(np.percentile(y, 99.9 if spec == BRIGHT else 0.1))
+        level = (extreme,) * 3
+        return cls(level, spec == BRIGHT, 0.5 * (typical + extreme))
+
+    @property
+    def spec(self) -> str:
+        """"bright" or "dark"."""
+        return BRIGHT if self.bright else DARK
+
+    def learned(self, pixels_rgb: np.ndarray) -> "BrightnessModel":
+        """The marker's level from its core pixels; the threshold stays (flicker scales both sides)."""
+        level = float(np.median(luma_bt601(np.asarray(pixels_rgb).reshape(-1, 3))))
+        return BrightnessModel((level,) * 3, self.bright, self.threshold_dn)
+
+    def mask(self, rgb: np.ndarray) -> np.ndarray:
+        """Binary membership of RGB pixels, shape (..., 3) → (...) bool."""
+        y = luma_bt601(rgb)
+        return y >= self.threshold_dn if self.bright else y <= self.threshold_dn

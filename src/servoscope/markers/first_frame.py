@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ServoscopeError
-from .colour import AUTO, ColourModel
+from .colour import AUTO, BRIGHTNESS, ColourModel
 from .marker_state import MarkerTracker
 from .selection import auto_colour_models, choose_markers, marker_candidates
 from .settings import TrackerSettings
@@ -53,9 +53,13 @@ def choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSetting
         # Pins are in frame pixels; a field's image has every row_step-th row from row_offset.
         return None if near is None else (near[0], (near[1] - row_offset) / row_step)
 
+    # Two markers of one brightness are the same kind of blob: the lead is the one on the right
+    # (as the twin and the paper film them), unless a pin says otherwise.
+    same_kind = isinstance(lead.seed, str) and lead.seed in BRIGHTNESS and lead.seed == trail.seed
     choice = choose_markers(cands[0], cands[1], lead_near=in_image(settings.lead_near),
                             trail_near=in_image(settings.trail_near),
-                            lead_colour=_spec_text(lead.seed), trail_colour=_spec_text(trail.seed), source=str(path))
+                            lead_colour=_spec_text(lead.seed), trail_colour=_spec_text(trail.seed), source=str(path),
+                            lead_right=same_kind and settings.lead_near is None and settings.trail_near is None)
     lead.hint = (choice.lead.x_px, choice.lead.y_px)
     trail.hint = (choice.trail.x_px, choice.trail.y_px)
     return choice.warnings
@@ -70,6 +74,10 @@ def nothing_matches(path: Path, tracker: MarkerTracker, rgb: np.ndarray) -> str:
     """Error message for a marker colour that matches nothing, with the closest blobs."""
     from .candidates import find_candidates
 
+    if isinstance(tracker.seed, str) and tracker.seed in BRIGHTNESS:
+        return (f"{path}: no {tracker.seed} blob for the {tracker.name} marker in the first frame (threshold "
+                f"{getattr(tracker.model, 'threshold_dn', float('nan')):.0f} of 255); check the footage with "
+                "`servoscope markers`, or pin the marker: lead = {brightness = \"bright\", near = [x, y]}")
     text = _spec_text(tracker.seed) if tracker.seed != AUTO else "auto"
     msg = f"{path}: the {tracker.name} marker's colour {text} matches nothing in the first frame"
     cands = find_candidates(rgb)

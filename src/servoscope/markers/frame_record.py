@@ -39,6 +39,8 @@ class EngineInput:
         The LED's seed colour; None without an LED.
     progress : callable or None
         Called with the number of frames done, now and then.
+    led_brightness : {"bright", "dark"} or None
+        An LED told by brightness (monochrome footage): its model is made from the first frame.
     """
 
     path: Path
@@ -50,6 +52,7 @@ class EngineInput:
     trail_spec: object
     led_model: ColourModel | None
     progress: Callable[[int], None] | None = None
+    led_brightness: str | None = None
 
 
 @dataclass

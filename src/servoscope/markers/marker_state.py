@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from .centroid import SoftCentroid, soft_centroid
-from .colour import AUTO, ColourModel
+from .colour import AUTO, BRIGHTNESS, BrightnessModel, ColourModel
 from .moments import Moments, weighted_moments
 from .settings import TrackerSettings
 
@@ -42,7 +42,9 @@ class MarkerTracker:
     def __init__(self, name: str, spec: tuple[float, float, float] | str, settings: TrackerSettings):
         self.name = name
         self.seed = spec
-        self.model: ColourModel | None = None if spec == AUTO else ColourModel.from_seed(spec)  # type: ignore[arg-type]
+        # "auto" and brightness markers get their model from the first frame.
+        self.model: ColourModel | BrightnessModel | None = (
+            None if spec == AUTO or spec in BRIGHTNESS else ColourModel.from_seed(spec))  # type: ignore[arg-type]
         self.expected_area: float | None = None  # binary area of the hue mask (px²)
         # Position and velocity as Python floats: updated every frame, where small-array NumPy costs
         # more than the arithmetic.
@@ -235,7 +237,7 @@ class MarkerTracker:
         roi = rgb[y0:y1, x0:x1]
         sel = self.model.mask(roi) if self.model is not None else np.ones(roi.shape[:2], bool)
         if sel.sum() >= 3:
-            self.model = ColourModel.learn(roi[sel])
+            self.model = self.model.learned(roi[sel]) if self.model is not None else ColourModel.learn(roi[sel])
             self.expected_area = float(self.model.mask(roi).sum())
         self.extent_px = r
 

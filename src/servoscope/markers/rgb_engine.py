@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ServoscopeError
 from ..video.reader import iter_frames
-from .colour import AUTO
+from .colour import AUTO, BRIGHTNESS, BrightnessModel
 from .first_frame import choose_first, nothing_matches, take_auto_colours
 from .frame_record import EngineInput, FrameRecord, TrackLog
 from .led_level import led_brightness, locate_led
@@ -36,6 +36,13 @@ def run_rgb(job: EngineInput, log: TrackLog) -> None:
     prev_rgb: np.ndarray | None = None
     for frame in iter_frames(path, fields=job.fields):
         rgb = frame.rgb
+        if frame.index == 0:
+            # Markers (and an LED) told by brightness: their thresholds from this frame's levels.
+            for tracker, spec in ((lead, job.lead_spec), (trail, job.trail_spec)):
+                if spec in BRIGHTNESS:
+                    tracker.model = BrightnessModel.from_frame(rgb, spec)
+            if job.led_brightness is not None:
+                led_model = BrightnessModel.from_frame(rgb, job.led_brightness)
         if frame.index == 0 and AUTO in (job.lead_spec, job.trail_spec):
             take_auto_colours(path, rgb, (lead, trail), led_model)
         if frame.index == 0:

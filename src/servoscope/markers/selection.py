@@ -267,7 +267,8 @@ def _pinned(cands: list[BlobCandidate], near: tuple[float, float], name: str, co
 
 def choose_markers(lead: list[BlobCandidate], trail: list[BlobCandidate], *,
                    lead_near: tuple[float, float] | None = None, trail_near: tuple[float, float] | None = None,
-                   lead_colour: str = "", trail_colour: str = "", source: str = "video") -> MarkerChoice:
+                   lead_colour: str = "", trail_colour: str = "", source: str = "video",
+                   lead_right: bool = False) -> MarkerChoice:
     """The best pair of candidates (lead, trail), pins honoured.
 
     Parameters
@@ -281,6 +282,8 @@ def choose_markers(lead: list[BlobCandidate], trail: list[BlobCandidate], *,
         The colours as given, for messages.
     source : str
         The file the messages name.
+    lead_right : bool
+        Only pairs whose lead lies right of its trail (markers of one kind, told apart by side).
 
     Raises
     ------
@@ -296,6 +299,8 @@ def choose_markers(lead: list[BlobCandidate], trail: list[BlobCandidate], *,
         for j, b in enumerate(trail):
             if math.hypot(a.x_px - b.x_px, a.y_px - b.y_px) < 2.0:
                 continue  # one blob matching both colours cannot be both stickers
+            if lead_right and a.x_px <= b.x_px:
+                continue
             size = math.exp(-0.5 * (math.log(a.area_px / b.area_px) / SIZE_LOG_SCALE) ** 2)
             pairs.append((a.score * b.score * size, i, j))
     if not pairs:

@@ -18,7 +18,10 @@ class TrackerSettings:
     Attributes
     ----------
     lead, trail : str
-        Marker colours: ``"#rrggbb"``, a CSS name, or ``"auto"``.
+        Marker colours: ``"#rrggbb"``, a CSS name, or ``"auto"``; or, for
+        monochrome footage, ``"bright"`` (white dots on a dark blade) or
+        ``"dark"``: told apart by position (``lead_near``/``trail_near``), else
+        the lead is the one on the right of the picture.
     led : str or None
         LED colour; None when the footage has no LED.
     camera : CameraModel or None
@@ -129,6 +132,10 @@ def resolve_engine(settings: TrackerSettings) -> str:
         raise ServoscopeError(f"backend: {settings.backend!r}: {RETIRED_BACKENDS[settings.backend]}")
     if settings.backend not in BACKENDS:
         raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
+    brightness = any(str(m).strip().lower() in ("bright", "dark") for m in (settings.lead, settings.trail))
+    if brightness and settings.engine in ("numba", "numpy"):
+        raise ServoscopeError(f"engine {settings.engine!r} tells markers by colour; markers told by brightness "
+                              "(\"bright\", \"dark\") are tracked by engine=\"reference-rgb\" (or \"auto\")")
     if settings.engine == "auto":
-        return "reference-rgb" if settings.centroid == "projected" else "numba"
+        return "reference-rgb" if settings.centroid == "projected" or brightness else "numba"
     return settings.engine

@@ -35,7 +35,7 @@ from ..camera.rolling_shutter import angle_sample_times, check_readout
 from ..camera.undistort import undistort_centroids
 from ..errors import ServoscopeError
 from ..video.reader import VideoInfo, probe_video, thread_budget
-from .colour import AUTO, ColourModel, parse_colour
+from .colour import AUTO, BRIGHTNESS, ColourModel, parse_colour
 from .frame_checks import flag_nonrigid, flag_repeated
 from .frame_record import EngineInput, TrackLog
 from .led_level import input_start
@@ -103,9 +103,13 @@ def track_video(
     engine = resolve_engine(settings)
     lead = MarkerTracker("lead", lead_spec, settings)
     trail = MarkerTracker("trail", trail_spec, settings)
-    led_model = ColourModel.from_seed(led_spec) if led_spec is not None else None  # type: ignore[arg-type]
+    _check_monochrome(path, info, (lead_spec, trail_spec))
+    # A brightness LED's model comes from the first frame, as brightness markers' do.
+    led_model = (ColourModel.from_seed(led_spec) if led_spec is not None and led_spec not in BRIGHTNESS
+                 else None)  # type: ignore[arg-type]
 
-    job = EngineInput(path, fields, settings, lead, trail, lead_spec, trail_spec, led_model, progress)
+    job = EngineInput(path, fields, settings, lead, trail, lead_spec, trail_spec, led_model, progress,
+                      led_spec if led_spec in BRIGHTNESS else None)
     log = TrackLog()
     if engine == "reference-rgb":
         run_rgb(job, log)
@@ -117,6 +121,25 @@ def track_video(
     if settings.reference is not None:
         track = _against_reference(path, settings, track)
     return track
+
+
+def _check_monochrome(path: Path, info: VideoInfo, specs) -> None:
+    """Refuse colour markers on monochrome footage, saying how to give brightness markers."""
+    from ..video.frame_source import is_frame_source
+    from ..video.sources import open_frame_source
+
+    if is_frame_source(path):
+        source = open_frame_source(path)
+        source.close()
+        mono = source.header.monochrome
+    else:
+        mono = (info.pixel_format or "").startswith("gray")
+    if mono and any(spec not in BRIGHTNESS for spec in specs):
+        raise ServoscopeError(
+            f"{path}: the footage is monochrome, so markers cannot be told by colour; give them by brightness: "
+            "lead = {brightness = \"bright\", near = [x, y]} (and trail likewise) in [markers], or --lead "
+            "'bright@x,y' --trail 'bright@x,y' (\"dark\" for dark dots on a light blade; without positions the "
+            "lead is the one on the right)")
 
 
 def _as_reference(text: str) -> str:

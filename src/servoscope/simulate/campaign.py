@@ -24,6 +24,7 @@ from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
 from ..defaults import REFERENCE_COLOURS
+from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
 from .._io import write_text_atomic
@@ -210,7 +211,12 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
             else:
                 gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth,
                                        phase)) if flicker else 1.0
-                writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]), float(roll[i])))
+                if preset.monochrome:
+                    clean = renderer.composite(float(pitch[i]), float(led[i]), gain, tuple(shake[i]), float(roll[i]))
+                    writer.write_gray(_gray_frame(clean, preset, noise_seed, i), preset.bit_depth)
+                else:
+                    writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]),
+                                                 float(roll[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -232,6 +238,19 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
+
+
+def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
+    """A monochrome camera's frame: the noise-free scene's BT.601 luma at ``bit_depth`` bits, with its noise.
+
+    The sensor noise is ``noise_sigma_dn`` of 8-bit DN scaled to the depth (seeded per
+    frame), then the samples are rounded and clipped to the depth's range.
+    """
+    top = 2 ** preset.bit_depth - 1
+    y = luma_bt601(clean_rgb).astype(np.float64) * (top / 255.0)
+    rng = np.random.default_rng([noise_seed, 0x6A7, index])
+    y += rng.standard_normal(y.shape) * (preset.noise_sigma_dn * top / 255.0)
+    return np.clip(np.rint(y), 0, top).astype(np.uint8 if preset.bit_depth <= 8 else np.uint16)
 
 
 def reference_stickers(scene: Scene) -> tuple[Clutter, Clutter]:
@@ -345,6 +364,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
     if p.reference_stickers:
         scene = replace(scene, clutter=tuple(scene.clutter) + reference_stickers(scene))
+    if p.monochrome and "lead_colour" not in scene_kw and "trail_colour" not in scene_kw:
+        # White dots on the dark blade: what a monochrome camera's users stick on.
+        scene = replace(scene, lead_colour="#f4f4f4", trail_colour="#f4f4f4")
     camera = p.camera()
 
     out = Path(outdir)
@@ -413,7 +435,8 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             # Real-camera options, only when set (default truth unchanged).
             **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
-                                          "frames_format", "roll_rad", "roll_hz", "reference_stickers")
+                                          "frames_format", "roll_rad", "roll_hz", "reference_stickers", "monochrome",
+                                          "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
@@ -436,9 +459,10 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
         *([f"readout_s = {_toml_float(p.readout_s)}"] if p.readout_s > 0 else []),
         "",
         "[markers]",
-        f"lead = {_toml_str(scene.lead_colour)}",
-        f"trail = {_toml_str(scene.trail_colour)}",
-        f"led = {_toml_str(scene.led_colour)}",
+        # Monochrome footage: every marker (and the LED) told by brightness.
+        f"lead = {_toml_str('bright' if p.monochrome else scene.lead_colour)}",
+        f"trail = {_toml_str('bright' if p.monochrome else scene.trail_colour)}",
+        f"led = {_toml_str('bright' if p.monochrome else scene.led_colour)}",
         *([f"reference = [{_toml_str(REFERENCE_COLOURS[0])}, {_toml_str(REFERENCE_COLOURS[1])}]"]
           if p.reference_stickers else []),
         "",
@@ -447,6 +471,7 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
     ]
     for t in tests:
         source = ([f"frames = {_toml_str(t['video'] + '/*.tif')}", f"fps = {_toml_float(float(frames_fps))}"]
+                  + ([f"bits = {p.bit_depth}"] if p.monochrome else [])
                   if frames_fps is not None else [f"video = {_toml_str(t['video'])}"])
         lines += ["", "[[tests]]", *source, f"kind = {_toml_str(t['kind'])}"]
         if t["kind"] == "sine":

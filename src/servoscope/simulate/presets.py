@@ -132,6 +132,15 @@ class CampaignPreset:
         :data:`servoscope.defaults.REFERENCE_COLOURS`, 1.3× the blade's), which
         campaign.toml names as ``[markers] reference``: the blade's angle is then
         measured against the line joining them.
+    monochrome : bool
+        A monochrome high-speed camera: each frame is the scene's BT.601 luma
+        at ``bit_depth`` bits (sensor noise scaled with it), written as an image
+        sequence of gray TIFFs (8-bit files for 8 bits, 16-bit files otherwise,
+        the depth in the manifest's ``bits``); the stickers are white dots on the
+        dark blade and campaign.toml gives the markers and the LED as
+        ``"bright"``. Needs ``frames_format="tiff16"``; global shutter, no blur.
+    bit_depth : int
+        Monochrome samples' depth: 8, 10, 12 or 16.
     frames_format : {None, "tiff16"}
         Write each test as a folder of frames instead of a video (the
         manifest then says ``frames`` and ``fps``): ``"tiff16"``, 16-bit RGB
@@ -180,6 +189,8 @@ class CampaignPreset:
     roll_rad: float = 0.0
     roll_hz: float = 3.0
     reference_stickers: bool = False
+    monochrome: bool = False
+    bit_depth: int = 8
 
     def __post_init__(self) -> None:
         self._check_camera_options()
@@ -228,6 +239,10 @@ class CampaignPreset:
                 and abs(self.roll_rad) < 0.5):
             raise ServoscopeError(f"roll_rad must be finite and under 0.5 rad, roll_hz > 0 (got {self.roll_rad!r}, "
                                   f"{self.roll_hz!r})")
+        if self.monochrome and (self.frames_format != "tiff16" or self.bit_depth not in (8, 10, 12, 16)
+                                or self.readout_s > 0 or self.motion_blur):
+            raise ServoscopeError("monochrome footage is written as an image sequence (frames_format=\"tiff16\") "
+                                  "of 8, 10, 12 or 16 bits, with a global shutter and no motion blur")
         if self.readout_s > 0:
             # The row-by-row renderer draws one pose per row; blur would need
             # sub-exposures per row, shake (and roll) a per-row move of the background.

@@ -70,5 +70,28 @@ class TiffSequenceWriter:
         self.frames_written += 1
         return t
 
+    def write_gray(self, frame: np.ndarray, bits: int, time_s: float | None = None) -> float:
+        """Append one monochrome frame of ``bits``-bit samples (uint8 for 8, uint16 up to 16), stored as they are.
+
+        A monochrome high-speed camera's file: 8-bit samples in 8-bit TIFFs, 10–16-bit
+        ones in 16-bit TIFFs with their depth in the manifest (``bits``), as
+        such cameras save them. Returns the frame's time.
+        """
+        import tifffile
+
+        a = np.asarray(frame)
+        want = np.uint8 if bits <= 8 else np.uint16
+        if a.dtype != want or a.shape != (self.height, self.width) or (a.size and int(a.max()) >= 2**bits):
+            raise ServoscopeError(f"frame must be {np.dtype(want).name} of shape {(self.height, self.width)} with "
+                                  f"{bits}-bit samples, not {a.dtype} {a.shape}")
+        t = float(Fraction(self.frames_written) / self.fps)
+        if time_s is not None and abs(time_s - t) > 1e-9:
+            raise ServoscopeError(f"{self.folder}: an image sequence's frames are evenly spaced; frame "
+                                  f"{self.frames_written} is at {t} s, not {time_s} s")
+        tifffile.imwrite(self.folder / f"frame_{self.frames_written:06d}.tif", a, photometric="minisblack",
+                         compression="zlib")
+        self.frames_written += 1
+        return t
+
     def close(self) -> None:
         """Nothing held open between frames."""
