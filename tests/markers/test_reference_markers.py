@@ -41,12 +41,12 @@ def _angle_error_deg(folder, video, settings):
 
 @pytest.fixture(scope="module")
 def dwell(tmp_path_factory):
-    """One 2 Hz dwell with reference stickers, rendered steady and with the camera rolling ±0.5° at 3 Hz."""
+    """One 2 Hz dwell with reference stickers: steady, the camera rolling ±0.5° at 3 Hz, the airframe rocking ±0.5° at 2 Hz."""
     out = {}
-    for name, roll in (("steady", 0.0), ("rolling", ROLL)):
+    for name, motion in (("steady", {}), ("rolling", {"roll_rad": ROLL}), ("rocking", {"rock_rad": ROLL})):
         folder = tmp_path_factory.mktemp(name)
-        simulate_campaign(folder, "quick", 0, frequencies_hz=(2.0,), include_step=False, roll_rad=roll,
-                          reference_stickers=True, **SMALL)
+        simulate_campaign(folder, "quick", 0, frequencies_hz=(2.0,), include_step=False, reference_stickers=True,
+                          **motion, **SMALL)
         out[name] = folder
     return out
 
@@ -68,18 +68,24 @@ def test_roll_turns_the_whole_picture_about_its_centre():
     assert math.atan2(b[1] - a[1], a[0] - b[0]) == pytest.approx(ROLL, abs=1e-12)
 
 
-def test_reference_line_takes_the_roll_off_the_angle(dwell):
-    settings = TrackerSettings(exposure_s=0.01, reference=REFERENCE_COLOURS)
+@pytest.mark.parametrize("motion", ["rolling", "rocking"])
+def test_reference_line_takes_the_roll_off_the_angle(dwell, motion):
+    from servoscope.camera import CameraModel
+
+    camera = CameraModel.load(dwell["steady"] / "camera.json")
+    settings = TrackerSettings(exposure_s=0.01, reference=REFERENCE_COLOURS, camera=camera)
     steady, _, _ = _angle_error_deg(dwell["steady"], "dwell_01_2.00Hz.avi", settings)
-    rolling, track, truth = _angle_error_deg(dwell["rolling"], "dwell_01_2.00Hz.avi", settings)
-    unreferenced, _, _ = _angle_error_deg(dwell["rolling"], "dwell_01_2.00Hz.avi", TrackerSettings(exposure_s=0.01))
+    moving, track, truth = _angle_error_deg(dwell[motion], "dwell_01_2.00Hz.avi", settings)
+    unreferenced, _, _ = _angle_error_deg(dwell[motion], "dwell_01_2.00Hz.avi",
+                                          TrackerSettings(exposure_s=0.01, camera=camera))
     assert track.n_valid == track.n_frames
-    # The issue's target: no more than 1.5x a steady camera's error (measured: 0.0020° vs 0.0019°) ...
-    assert rolling <= 1.5 * steady, (rolling, steady)
-    # ... where the image's axes alone are off by the roll (0.35° RMS).
-    assert unreferenced > 50 * rolling
-    # The reference line's own motion is the picture's roll, less its median.
-    roll = np.asarray(truth["roll_rad"])
+    # The issue's target: no more than 1.5x a steady camera's error (measured: 0.0020° and 0.0022°
+    # against 0.0019°) ...
+    assert moving <= 1.5 * steady, (moving, steady)
+    # ... where the image's axes alone are off by the roll or the rocking (0.35° RMS).
+    assert unreferenced > 50 * moving
+    # The reference line's own motion is the picture's roll (the airframe's rocking), less its median.
+    roll = np.asarray(truth["roll_rad" if motion == "rolling" else "rock_rad"])
     np.testing.assert_allclose(track.reference_angle_rad - np.mean(track.reference_angle_rad),
                                roll - roll.mean(), atol=math.radians(0.01))
 

@@ -188,6 +188,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     phase = preset.flicker_phase_rad or 0.0
     shake = _shake_px(preset, n, noise_seed)
     roll = preset.roll_rad * np.sin(2.0 * np.pi * preset.roll_hz * time_s)
+    rock = preset.rock_rad * np.sin(2.0 * np.pi * preset.rock_hz * time_s)
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     if preset.frames_format is not None:
         writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
@@ -207,16 +208,18 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                 sub_led = led_exposure_fraction(sub_t, signal.t0_s, sub_dt)
                 sub_gain = (lamp_gain(sub_t, sub_dt, preset.flicker_hz, preset.flicker_depth, phase)
                             if flicker else None)
-                writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i]), float(roll[i])))
+                writer.write(renderer.render_blurred(sub_pitch, sub_led, i, sub_gain, tuple(shake[i]), float(roll[i]),
+                                                     float(rock[i])))
             else:
                 gain = float(lamp_gain(time_s[i], preset.exposure_s, preset.flicker_hz, preset.flicker_depth,
                                        phase)) if flicker else 1.0
                 if preset.monochrome:
-                    clean = renderer.composite(float(pitch[i]), float(led[i]), gain, tuple(shake[i]), float(roll[i]))
+                    clean = renderer.composite(float(pitch[i]), float(led[i]), gain, tuple(shake[i]), float(roll[i]),
+                                               float(rock[i]))
                     writer.write_gray(_gray_frame(clean, preset, noise_seed, i), preset.bit_depth)
                 else:
                     writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]),
-                                                 float(roll[i])))
+                                                 float(roll[i]), float(rock[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -235,6 +238,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **rolling,
         **({"shake_xy_px": shake.tolist()} if preset.shake_px > 0 else {}),
         **({"roll_rad": roll.tolist()} if preset.roll_rad != 0 else {}),
+        **({"rock_rad": rock.tolist()} if preset.rock_rad != 0 else {}),
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
@@ -263,8 +267,8 @@ def reference_stickers(scene: Scene) -> tuple[Clutter, Clutter]:
     """
     d = 1.3 * scene.sticker_diameter_px
     y = 0.9 * scene.height
-    return (Clutter(REFERENCE_COLOURS[0], (0.92 * scene.width, y), (d, d), shape="disc"),
-            Clutter(REFERENCE_COLOURS[1], (0.08 * scene.width, y), (d, d), shape="disc"))
+    return (Clutter(REFERENCE_COLOURS[0], (0.92 * scene.width, y), (d, d), shape="disc", airframe=True),
+            Clutter(REFERENCE_COLOURS[1], (0.08 * scene.width, y), (d, d), shape="disc", airframe=True))
 
 
 def _shake_px(preset: CampaignPreset, n: int, noise_seed: int) -> np.ndarray:
@@ -435,7 +439,8 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             # Real-camera options, only when set (default truth unchanged).
             **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
-                                          "frames_format", "roll_rad", "roll_hz", "reference_stickers", "monochrome",
+                                          "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
+                                          "reference_stickers", "monochrome",
                                           "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },

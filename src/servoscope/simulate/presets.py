@@ -127,6 +127,12 @@ class CampaignPreset:
         are counted, constant over an exposure; truth's ``angle_rad`` stays the
         blade's against the airframe and ``roll_rad`` per frame says the
         picture's. 0 (the default): a steady camera. Global shutter only.
+    rock_rad, rock_hz : float
+        The airframe rocking on its skids: the blade, its pivot and the
+        reference stickers turn by ``rock_rad·sin(2π·rock_hz·t)`` about the
+        point below the pivot at the picture's bottom edge; the background
+        stays. Truth's ``angle_rad`` stays the blade's against the airframe,
+        ``rock_rad`` per frame says the airframe's. Global shutter only.
     reference_stickers : bool
         Two stickers on the airframe (the image's lower corners, colours
         :data:`servoscope.defaults.REFERENCE_COLOURS`, 1.3× the blade's), which
@@ -188,6 +194,8 @@ class CampaignPreset:
     frames_format: str | None = None
     roll_rad: float = 0.0
     roll_hz: float = 3.0
+    rock_rad: float = 0.0
+    rock_hz: float = 2.0
     reference_stickers: bool = False
     monochrome: bool = False
     bit_depth: int = 8
@@ -235,10 +243,11 @@ class CampaignPreset:
             raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
         if self.frames_format not in (None, "tiff16"):
             raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
-        if not (math.isfinite(self.roll_rad) and math.isfinite(self.roll_hz) and self.roll_hz > 0
-                and abs(self.roll_rad) < 0.5):
-            raise ServoscopeError(f"roll_rad must be finite and under 0.5 rad, roll_hz > 0 (got {self.roll_rad!r}, "
-                                  f"{self.roll_hz!r})")
+        for name in ("roll", "rock"):
+            amp, hz = getattr(self, f"{name}_rad"), getattr(self, f"{name}_hz")
+            if not (math.isfinite(amp) and math.isfinite(hz) and hz > 0 and abs(amp) < 0.5):
+                raise ServoscopeError(f"{name}_rad must be finite and under 0.5 rad, {name}_hz > 0 (got {amp!r}, "
+                                      f"{hz!r})")
         if self.monochrome and (self.frames_format != "tiff16" or self.bit_depth not in (8, 10, 12, 16)
                                 or self.readout_s > 0 or self.motion_blur):
             raise ServoscopeError("monochrome footage is written as an image sequence (frames_format=\"tiff16\") "
@@ -247,7 +256,7 @@ class CampaignPreset:
             # The row-by-row renderer draws one pose per row; blur would need
             # sub-exposures per row, shake (and roll) a per-row move of the background.
             unsupported = [name for name, on in (("motion_blur", self.motion_blur), ("shake_px", self.shake_px > 0),
-                                                 ("roll_rad", self.roll_rad != 0))
+                                                 ("roll_rad", self.roll_rad != 0), ("rock_rad", self.rock_rad != 0))
                            if on]
             if unsupported:
                 raise ServoscopeError(f"{' and '.join(unsupported)} cannot be combined with a rolling shutter "

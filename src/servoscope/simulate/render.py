@@ -317,14 +317,33 @@ def picture_motion(scene: Scene, shift_px: tuple[float, float] = (0.0, 0.0), rol
                      [-s, c, cy + s * cx - c * cy + shift_px[1]]])
 
 
-def _moved(xy: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
+def airframe_motion(scene: Scene, rock_rad: float) -> np.ndarray:
+    """The 2×3 map of the airframe rocking on its skids, in the ideal image: a turn by ``rock_rad`` about the
+    point below the pivot at the picture's bottom edge, counter-clockwise positive as angles are counted.
+
+    The blade, its pivot and everything fixed to the airframe (``Clutter.airframe``) turn with it;
+    the rest of the scene stays.
+    """
+    c, s = math.cos(rock_rad), math.sin(rock_rad)
+    cx, cy = scene.pivot_xy_px[0], float(scene.height - 1)
+    return np.array([[c, s, cx - c * cx - s * cy], [-s, c, cy + s * cx - c * cy]])
+
+
+def _moved(xy: np.ndarray, motion: np.ndarray | None, airframe: np.ndarray | None = None) -> np.ndarray:
+    if airframe is not None:
+        xy = xy @ airframe[:, :2].T + airframe[:, 2]
     return xy if motion is None else xy @ motion[:, :2].T + motion[:, 2]
 
 
-def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None) -> None:
-    """Composite the scene's static clutter, moved by the picture's ``motion`` (2×3), into ``image`` (float32 RGB)."""
+def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, airframe=None) -> None:
+    """Composite the scene's clutter, moved by the picture's ``motion`` (2×3; the airframe's items first by
+    ``airframe``, a map of recorded points), into ``image`` (float32 RGB)."""
     for item in scene.clutter:
-        acc, x0, y0, sign = _accumulated(_moved(item.outline_px(), motion), scene.width, scene.height)
+        xy = item.outline_px()
+        if item.airframe and airframe is not None:
+            xy = airframe(xy)
+        xy = _moved(xy, motion)
+        acc, x0, y0, sign = _accumulated(xy, scene.width, scene.height)
         if acc.shape[0] > 0 and acc.shape[1] > 1:
             _composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
 
@@ -394,18 +413,33 @@ class FrameRenderer:
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
-    def outlines_px(self, pitch_rad: float) -> list[np.ndarray]:
-        """Recorded (distorted) outlines of blade, lead sticker, trail sticker, (LED housing,) LED."""
-        xy = self.scene.to_image(self._all_uv, float(pitch_rad))
+    def outlines_px(self, pitch_rad: float, airframe: np.ndarray | None = None) -> list[np.ndarray]:
+        """Recorded (distorted) outlines of blade, lead sticker, trail sticker, (LED housing,) LED.
+
+        ``airframe`` (2×3, :func:`airframe_motion`) turns them with the airframe, in the
+        ideal image (before the lens), as the airframe turns in the world.
+        """
+        xy = _moved(self.scene.to_image(self._all_uv, float(pitch_rad)), None, airframe)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)
         return np.split(xy, self._splits)
 
-    def _restore_lit(self, gain: np.ndarray | float, motion: np.ndarray | None) -> None:
-        """Fill the whole working buffer with the background, moved (2×3 map) and scaled by the lamps' gain."""
+    def _airframe_map(self, airframe: np.ndarray | None):
+        """Recorded points of something fixed to the airframe → where the airframe's turn puts them (through the lens)."""
+        if airframe is None:
+            return None
+        if self.camera is None:
+            return lambda xy: _moved(xy, None, airframe)
+        camera = self.camera
+        return lambda xy: camera.distort_points(_moved(camera.undistort_points(xy)[0], None, airframe))
+
+    def _restore_lit(self, gain: np.ndarray | float, motion: np.ndarray | None,
+                     airframe: np.ndarray | None = None) -> None:
+        """Fill the whole working buffer with the background, moved (2×3 map) and scaled by the lamps' gain;
+        the airframe's clutter moved by ``airframe`` first."""
         h, w = self.scene.height, self.scene.width
         g = np.asarray(gain, dtype=np.float32)
-        if motion is None:
+        if motion is None and airframe is None:
             np.multiply(self._bg, g.reshape(-1, 1, 1) if g.ndim else g, out=self._work)
         else:
             # The plain background is smooth (blotches tenths of the image
@@ -413,14 +447,18 @@ class FrameRenderer:
             # sharp edges, which interpolation would not move exactly: it is
             # drawn again, moved, with exact coverage.
             plain = _background(replace(self.scene, clutter=()))
-            self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), motion, (w, h), flags=cv2.INTER_CUBIC,
-                                           borderMode=cv2.BORDER_REFLECT)
-            _draw_clutter(self._work, self.scene, motion)
+            if motion is None:
+                self._work[:] = plain
+            else:
+                self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), motion, (w, h), flags=cv2.INTER_CUBIC,
+                                               borderMode=cv2.BORDER_REFLECT)
+            _draw_clutter(self._work, self.scene, motion, self._airframe_map(airframe))
             self._work *= g
         self._dirty = [(0, h, 0, w)]
 
     def composite(self, pitch_rad: float, led_level: float, lamp_gain: float = 1.0,
-                  shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
+                  shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0,
+                  rock_rad: float = 0.0) -> np.ndarray:
         """The noise-free frame, float32 DN, shape (height, width, 3).
 
         The returned array is the renderer's working buffer: copy it before
@@ -441,14 +479,18 @@ class FrameRenderer:
         roll_rad : float
             Rotation of the whole picture about its centre (a camera that rolls, a
             phone's stabilisation), see :func:`picture_motion`.
+        rock_rad : float
+            The airframe rocking on its skids: the blade and the airframe's clutter
+            turn, the rest stays (see :func:`airframe_motion`).
         """
         if not 0.0 <= led_level <= 1.0:
             raise ServoscopeError(f"led_level must be in [0, 1], not {led_level}")
         shift_px = (float(shift_px[0]), float(shift_px[1]))
         motion = None if shift_px == (0.0, 0.0) and roll_rad == 0.0 else picture_motion(self.scene, shift_px, roll_rad)
-        lit = lamp_gain != 1.0 or motion is not None
+        airframe = None if rock_rad == 0.0 else airframe_motion(self.scene, rock_rad)
+        lit = lamp_gain != 1.0 or motion is not None or airframe is not None
         if lit:
-            self._restore_lit(lamp_gain, motion)
+            self._restore_lit(lamp_gain, motion, airframe)
             # The dark LED is seen by the lamps' light; a lit one shines its own.
             led_colour = led_level * self._led_on + (1.0 - led_level) * lamp_gain * self._led_off
             colours = [c * lamp_gain for c in self._colours] + [led_colour]
@@ -459,7 +501,7 @@ class FrameRenderer:
             led_colour = self._led_off + led_level * (self._led_on - self._led_off)
             colours = self._colours + [led_colour]
         w, h = self.scene.width, self.scene.height
-        outlines = self.outlines_px(pitch_rad)
+        outlines = self.outlines_px(pitch_rad, airframe)
         if motion is not None:
             outlines = [_moved(xy, motion) for xy in outlines]
         for xy, colour in zip(outlines, colours):
@@ -573,7 +615,8 @@ class FrameRenderer:
         return out
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,
-               shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
+               shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0,
+               rock_rad: float = 0.0) -> np.ndarray:
         """One recorded frame: composite, add seeded noise, round to uint8.
 
         Parameters
@@ -584,19 +627,20 @@ class FrameRenderer:
             Fraction of the exposure during which the LED was lit, in [0, 1].
         frame_index : int
             Index of the frame (selects its noise).
-        lamp_gain, shift_px, roll_rad : float, (float, float), float
-            Lamps' flicker, camera shake and roll, see :meth:`composite`.
+        lamp_gain, shift_px, roll_rad, rock_rad : float, (float, float), float, float
+            Lamps' flicker, camera shake and roll, the airframe's rocking, see :meth:`composite`.
 
         Returns
         -------
         ndarray of uint8, shape (height, width, 3)
             RGB frame.
         """
-        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px, roll_rad), frame_index)
+        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px, roll_rad, rock_rad),
+                              frame_index)
 
     def render_blurred(self, pitch_rad: np.ndarray, led_lit: np.ndarray, frame_index: int = 0,
                        lamp_gain: np.ndarray | None = None, shift_px: tuple[float, float] = (0.0, 0.0),
-                       roll_rad: float = 0.0) -> np.ndarray:
+                       roll_rad: float = 0.0, rock_rad: float = 0.0) -> np.ndarray:
         """One recorded frame with real motion blur: the mean of sub-exposure composites.
 
         A sensor integrates the moving blade: sampling the exposure at
@@ -616,8 +660,8 @@ class FrameRenderer:
             The lamps' light in each sub-interval; None: steady.
         shift_px : (float, float)
             Camera shake (the same throughout the exposure).
-        roll_rad : float
-            Camera roll (the same throughout the exposure).
+        roll_rad, rock_rad : float
+            Camera roll and the airframe's rocking (the same throughout the exposure).
 
         Returns
         -------
@@ -630,7 +674,7 @@ class FrameRenderer:
             raise ServoscopeError("render_blurred: need one pitch, LED level and lamp gain per sample")
         total = np.zeros((self.scene.height, self.scene.width, 3), dtype=np.float64)
         for p, level, g in zip(pitch, lit, gain):
-            total += self.composite(float(p), float(level), float(g), shift_px, roll_rad)
+            total += self.composite(float(p), float(level), float(g), shift_px, roll_rad, rock_rad)
         return self._finished((total / pitch.size).astype(np.float32), frame_index)
 
 

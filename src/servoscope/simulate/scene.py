@@ -139,6 +139,9 @@ class Clutter:
         Rotation, counter-clockwise as seen in the image.
     shape : {"box", "disc"}
         A rectangle or an ellipse.
+    airframe : bool
+        Fixed to the airframe (a reference sticker): it rocks with the blade's
+        pivot (``rock_rad``), where the rest of the scene stays.
     """
 
     colour: str
@@ -146,6 +149,7 @@ class Clutter:
     size_px: tuple[float, float]
     angle_rad: float = 0.0
     shape: str = "box"
+    airframe: bool = False
 
     def __post_init__(self) -> None:
         colour_rgb(self.colour)  # validates
