@@ -1,6 +1,7 @@
-"""Exact-coverage rasterizer and frame renderer for the digital twin.
+"""The digital twin's frame renderer: the scene drawn with exact coverage, the camera's motion and noise.
 
-Every polygon is drawn with its *exact* area coverage of each pixel square
+Polygons are drawn by :mod:`servoscope.simulate.coverage` (exact area coverage,
+below in short). Every polygon is drawn with its *exact* area coverage of each pixel square
 ``[x-0.5, x+0.5] x [y-0.5, y+0.5]`` (pixel centres on integers), used as
 alpha. The coverage comes from a signed-area accumulation (the method of
 font rasterizers such as font-rs): each edge is cut where it crosses pixel
@@ -39,140 +40,13 @@ from numba import njit
 
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
+from .coverage import accumulated, composite, composite_rows, polygon_coverage, signed_area
 from .scene import Scene, colour_rgb
 
 __all__ = ["polygon_coverage", "FrameRenderer", "render_frame"]
 
 
 # -- kernels -------------------------------------------------------------------
-@njit(cache=True)
-def _accumulate(xs: np.ndarray, ys: np.ndarray, x0: int, y0: int, acc: np.ndarray) -> None:
-    """Add a closed polygon's signed-area increments to ``acc`` (ny, nx + 1).
-
-    Cell (j, i) is pixel (x0 + i, y0 + j), i.e. X in [i, i+1] and Y in
-    [j, j+1] with ``X = x - x0 + 0.5``, ``Y = y - y0 + 0.5``.
-    """
-    ny = acc.shape[0]
-    nx = acc.shape[1] - 1
-    n = xs.shape[0]
-    for e in range(n):
-        xa = xs[e] - x0 + 0.5
-        ya = ys[e] - y0 + 0.5
-        f = e + 1 if e + 1 < n else 0
-        xb = xs[f] - x0 + 0.5
-        yb = ys[f] - y0 + 0.5
-        dx = xb - xa
-        dy = yb - ya
-        if dy == 0.0:
-            continue  # a horizontal edge bounds no area to its right
-        # Integer grid lines strictly inside the edge, walked in edge order.
-        if dx > 0.0:
-            kx, kx_end, sx = np.floor(xa) + 1.0, np.ceil(xb) - 1.0, 1.0
-        elif dx < 0.0:
-            kx, kx_end, sx = np.ceil(xa) - 1.0, np.floor(xb) + 1.0, -1.0
-        else:
-            kx, kx_end, sx = 1.0, 0.0, 1.0  # none
-        if dy > 0.0:
-            ky, ky_end, sy = np.floor(ya) + 1.0, np.ceil(yb) - 1.0, 1.0
-        else:
-            ky, ky_end, sy = np.ceil(ya) - 1.0, np.floor(yb) + 1.0, -1.0
-        px = xa
-        py = ya
-        while True:
-            tx = 2.0
-            if (kx - kx_end) * sx <= 0.0:
-                tx = (kx - xa) / dx
-            ty = 2.0
-            if (ky - ky_end) * sy <= 0.0:
-                ty = (ky - ya) / dy
-            t = min(tx, ty, 1.0)
-            if tx <= t:
-                kx += sx
-            if ty <= t:
-                ky += sy
-            qx = xa + t * dx
-            qy = ya + t * dy
-            if t >= 1.0:
-                qx = xb
-                qy = yb
-            d = qy - py
-            if d != 0.0:
-                xm = 0.5 * (px + qx)
-                j = int(np.floor(0.5 * (py + qy)))
-                if 0 <= j < ny:
-                    i = int(np.floor(xm))
-                    if i < 0:
-                        acc[j, 0] += d  # left of the window: covers whole row segment
-                    elif i < nx:
-                        acc[j, i] += d * (i + 1 - xm)
-                        acc[j, i + 1] += d * (xm - i)
-            px = qx
-            py = qy
-            if t >= 1.0:
-                break
-
-
-@njit(cache=True)
-def _coverage_from_acc(acc: np.ndarray, sign: float) -> np.ndarray:
-    ny = acc.shape[0]
-    nx = acc.shape[1] - 1
-    cov = np.empty((ny, nx))
-    for j in range(ny):
-        s = 0.0
-        for i in range(nx):
-            s += acc[j, i]
-            cov[j, i] = s * sign
-    return cov
-
-
-@njit(cache=True)
-def _composite(frame: np.ndarray, acc: np.ndarray, x0: int, y0: int, colour: np.ndarray, sign: float) -> None:
-    """Blend ``colour`` into ``frame`` with the coverage held (as increments) in ``acc``."""
-    ny = acc.shape[0]
-    nx = acc.shape[1] - 1
-    c0 = colour[0]
-    c1 = colour[1]
-    c2 = colour[2]
-    for j in range(ny):
-        y = y0 + j
-        s = 0.0
-        for i in range(nx):
-            s += acc[j, i]
-            a = s * sign
-            if a <= 0.0:
-                continue  # outside (or rounding noise just below 0)
-            if a > 1.0:
-                a = 1.0
-            x = x0 + i
-            frame[y, x, 0] += a * (c0 - frame[y, x, 0])
-            frame[y, x, 1] += a * (c1 - frame[y, x, 1])
-            frame[y, x, 2] += a * (c2 - frame[y, x, 2])
-
-
-@njit(cache=True)
-def _composite_rows(frame: np.ndarray, xs: np.ndarray, ys: np.ndarray, rows: np.ndarray, x0: int, nx: int,
-                    colours: np.ndarray, sign: float) -> None:
-    """Blend row ``rows[r]`` of polygon ``(xs[r], ys[r])`` in ``colours[r]`` into ``frame``, for every r.
-
-    A rolling shutter sees each row at its own time: each row gets the
-    polygon at that row's pose, and only that row of its exact coverage is
-    drawn (the same signed-area accumulation, on a one-row window).
-    """
-    acc = np.zeros((1, nx + 1))
-    for r in range(rows.shape[0]):
-        j = rows[r]
-        ymin = ys[r, 0]
-        ymax = ys[r, 0]
-        for k in range(1, ys.shape[1]):
-            ymin = min(ymin, ys[r, k])
-            ymax = max(ymax, ys[r, k])
-        if j < np.floor(ymin + 0.5) or j > np.floor(ymax + 0.5):
-            continue  # this row's polygon does not reach row j
-        acc[:] = 0.0
-        _accumulate(xs[r], ys[r], x0, j, acc)
-        _composite(frame, acc, x0, j, colours[r], sign)
-
-
 @njit(cache=True, inline="always")
 def _round_clip(v: np.float32) -> np.uint8:
     # Branch-free clip, then truncation of v + 1/2 (v >= 0) is rounding; the
@@ -215,11 +89,6 @@ def _finish(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: 
 
 
 # -- public helpers ---------------------------------------------------------------
-def _signed_area(xy: np.ndarray) -> float:
-    x, y = xy[:, 0], xy[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
 def _distort(camera: CameraModel, points_px: np.ndarray) -> np.ndarray:
     """``camera.distort_points`` in numpy, for the many vertices of a rolling-shutter frame.
 
@@ -240,59 +109,6 @@ def _distort(camera: CameraModel, points_px: np.ndarray) -> np.ndarray:
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     return np.stack([k[0, 0] * xd + k[0, 2], k[1, 1] * yd + k[1, 2]], axis=1)
-
-
-def _window(xy: np.ndarray, width: int | None, height: int | None) -> tuple[int, int, int, int]:
-    """Pixel bounding box (x0, y0, nx, ny) of a polygon, clipped to the image if given."""
-    x0 = int(np.floor(xy[:, 0].min() + 0.5))
-    x1 = int(np.floor(xy[:, 0].max() + 0.5))
-    y0 = int(np.floor(xy[:, 1].min() + 0.5))
-    y1 = int(np.floor(xy[:, 1].max() + 0.5))
-    if width is not None:
-        x0, x1 = max(x0, 0), min(x1, width - 1)
-    if height is not None:
-        y0, y1 = max(y0, 0), min(y1, height - 1)
-    return x0, y0, max(x1 - x0 + 1, 0), max(y1 - y0 + 1, 0)
-
-
-def _accumulated(xy: np.ndarray, width: int | None, height: int | None) -> tuple[np.ndarray, int, int, float]:
-    xy = np.ascontiguousarray(xy, dtype=np.float64)
-    x0, y0, nx, ny = _window(xy, width, height)
-    acc = np.zeros((ny, nx + 1))
-    area = _signed_area(xy)
-    if nx > 0 and ny > 0 and area != 0.0:
-        _accumulate(xy[:, 0].copy(), xy[:, 1].copy(), x0, y0, acc)
-    # The running sum counts edges to the left of a pixel by their dy: that is
-    # minus the winding number for a positive shoelace area.
-    return acc, x0, y0, (-1.0 if area >= 0 else 1.0)
-
-
-def polygon_coverage(vertices_xy_px: np.ndarray, image_size: tuple[int, int] | None = None
-                     ) -> tuple[np.ndarray, int, int]:
-    """Exact fraction of each pixel square covered by a simple polygon.
-
-    Parameters
-    ----------
-    vertices_xy_px : ndarray, shape (n, 2)
-        Vertices in pixel coordinates (pixel centres on integers), either
-        orientation, closed implicitly. The polygon must not self-intersect.
-    image_size : (int, int), optional
-        (width, height): clip the result to the image.
-
-    Returns
-    -------
-    coverage : ndarray, shape (ny, nx)
-        Covered area of pixel ``(x0 + i, y0 + j)`` at ``coverage[j, i]``, in [0, 1].
-    x0, y0 : int
-        Pixel coordinates of ``coverage[0, 0]``.
-    """
-    xy = np.asarray(vertices_xy_px, dtype=np.float64).reshape(-1, 2)
-    if len(xy) < 3 or not np.all(np.isfinite(xy)):
-        raise ServoscopeError("polygon_coverage: need at least 3 finite vertices")
-    w, h = (None, None) if image_size is None else image_size
-    acc, x0, y0, sign = _accumulated(xy, w, h)
-    cov = _coverage_from_acc(acc, sign)
-    return np.clip(cov, 0.0, 1.0), x0, y0
 
 
 @functools.lru_cache(maxsize=4)
@@ -343,9 +159,9 @@ def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, ai
         if item.airframe and airframe is not None:
             xy = airframe(xy)
         xy = _moved(xy, motion)
-        acc, x0, y0, sign = _accumulated(xy, scene.width, scene.height)
+        acc, x0, y0, sign = accumulated(xy, scene.width, scene.height)
         if acc.shape[0] > 0 and acc.shape[1] > 1:
-            _composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
+            composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
 
 
 def _gaussian_table() -> np.ndarray:
@@ -505,11 +321,11 @@ class FrameRenderer:
         if motion is not None:
             outlines = [_moved(xy, motion) for xy in outlines]
         for xy, colour in zip(outlines, colours):
-            acc, x0, y0, sign = _accumulated(xy, w, h)
+            acc, x0, y0, sign = accumulated(xy, w, h)
             ny, nx = acc.shape[0], acc.shape[1] - 1
             if nx <= 0 or ny <= 0:
                 continue
-            _composite(self._work, acc, x0, y0, colour.astype(np.float64), sign)
+            composite(self._work, acc, x0, y0, colour.astype(np.float64), sign)
             if not lit:
                 self._dirty.append((y0, y0 + ny, x0, x0 + nx))
         return self._work
@@ -582,8 +398,8 @@ class FrameRenderer:
             x1 = min(int(np.floor(xs.max() + 0.5)), w - 1)
             if x1 < x0:
                 continue
-            sign = -1.0 if _signed_area(xy[0]) >= 0 else 1.0
-            _composite_rows(self._work, xs, yy, rows.astype(np.int64), x0, x1 - x0 + 1,
+            sign = -1.0 if signed_area(xy[0]) >= 0 else 1.0
+            composite_rows(self._work, xs, yy, rows.astype(np.int64), x0, x1 - x0 + 1,
                             np.ascontiguousarray(colours[rows], dtype=np.float64), sign)
             if keep_dirty:
                 self._dirty.append((y0, y1 + 1, x0, x1 + 1))

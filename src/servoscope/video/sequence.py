@@ -15,7 +15,6 @@ import glob as _glob
 import os
 import re
 
-from pathlib import Path
 
 import numpy as np
 
