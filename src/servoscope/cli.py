@@ -278,7 +278,18 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
-    if result.reference_angle_rad is not None:
+    if result.reference_angle_rad is None:
+        import numpy as np
+
+        from .angle.pivot import pivot_motion
+
+        pivot = pivot_motion(result.lead_xy_px, result.trail_xy_px, result.valid)
+        sigma = float(np.nanmedian(result.lead_sigma_px)) if np.isfinite(result.lead_sigma_px).any() else 0.0
+        if pivot is not None and pivot.moved(sigma):
+            click.echo(f"warning: the blade's pitch axis moved by {pivot.rms_px:.2f} px RMS in the picture (camera "
+                       "shake or roll, or the airframe rocking): a turn of the camera or the airframe is read as pitch; "
+                       "film two stickers on the airframe and give them with --reference", err=True)
+    else:
         import numpy as np
 
         motion = result.reference_angle_rad[np.isfinite(result.reference_angle_rad)]

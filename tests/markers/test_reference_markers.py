@@ -90,6 +90,19 @@ def test_reference_line_takes_the_roll_off_the_angle(dwell, motion):
                                roll - roll.mean(), atol=math.radians(0.01))
 
 
+def test_a_moving_axis_is_warned_where_no_reference_takes_it_off(dwell, tmp_path):
+    def warnings(folder, *extra):
+        run = subprocess.run([sys.executable, "-m", "servoscope", "track", str(folder / "dwell_01_2.00Hz.avi"),
+                              "--calibration", str(folder / "camera.json"), "--out", str(tmp_path / "t.csv"), *extra],
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        return run.stderr
+
+    assert "pitch axis moved" in warnings(dwell["rolling"]) and "pitch axis moved" in warnings(dwell["rocking"])
+    assert "pitch axis moved" not in warnings(dwell["steady"])
+    assert "pitch axis moved" not in warnings(dwell["rolling"], "--reference", ",".join(REFERENCE_COLOURS))
+
+
 def test_campaign_with_a_rolling_camera_identifies_the_servo(tmp_path):
     from servoscope.campaign.runner import identify
     from servoscope.report.build import build_report
@@ -107,6 +120,8 @@ def test_campaign_with_a_rolling_camera_identifies_the_servo(tmp_path):
         # ±0.5° of roll: about 1° peak to peak (less where a video is shorter than a roll period).
         assert 0.5 < math.degrees(t["reference_motion_rad"]["peak_to_peak"]) <= 1.0 + 1e-3, t["label"]
     assert "reference line turned" in build_report(res)
+    assert all(t["pivot_motion_px"] > 0.3 for t in s["tests"] if t["pivot_motion_px"] is not None)
+    assert not any("pitch axis moved" in w for w in res.warnings)  # the reference takes the turn off
 
 
 def test_led_switch_measured_against_the_levels_beside_it():

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._io import atomic_path, write_json_atomic
+from ..angle.pivot import pivot_motion
 from ..camera.exposure import ExposureEstimate
 from ..markers.track import Track
 from ..results import jsonable
@@ -199,6 +200,8 @@ class IdentificationResult:
                 "t0_uncertainty_s": input_start_stderr(test, track),
                 "warnings": list(track.warnings),
             }
+            pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+            entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
             if track.reference_angle_rad is not None:
                 # How much the airframe's reference line turned in this video (taken off the angle).
                 motion = track.reference_angle_rad[np.isfinite(track.reference_angle_rad)]

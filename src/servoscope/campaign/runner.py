@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..angle.pivot import pivot_motion
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
@@ -130,6 +131,30 @@ def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | 
     return (f"LED found in {found} of {len(need)} videos but not in {len(missing)}: {', '.join(missing)}; these have "
             "no input start, so no phase and no dead time from them (each video's own warning says why; check the "
             "LED colour, or give their t0_s in the manifest)")
+
+
+def pivot_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
+    """A warning when the blade's axis moved in the picture and no reference stickers take a turn off the angle.
+
+    See :mod:`servoscope.angle.pivot`: a camera that rolls, or an airframe that rocks, moves the
+    axis and turns the picture; the angle then holds the turn.
+    """
+    if campaign.reference is not None:
+        return None
+    moved = []
+    for test in campaign.tests:
+        track = tracks.get(test.label)
+        if track is None:
+            continue
+        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+        sigma = np.nanmedian(track.lead_sigma_px) if np.isfinite(track.lead_sigma_px).any() else 0.0
+        if pivot is not None and pivot.moved(float(sigma)):
+            moved.append(f"{test.label} {pivot.rms_px:.2f} px")
+    if not moved:
+        return None
+    return (f"the blade's pitch axis moved in the picture ({', '.join(moved)} RMS): the camera shook or rolled, or the "
+            "airframe rocked; a shake leaves the angle alone but a turn of the camera or the airframe is read as "
+            "pitch: film two stickers on the airframe and name them in [markers] reference")
 
 
 def campaign_exposure(campaign: Campaign, tracks: dict[str, Track]) -> ExposureEstimate:
@@ -323,6 +348,9 @@ def identify(
     led_warning = led_coverage_warning(campaign, tracks)
     if led_warning:
         warnings.insert(0, led_warning)  # first: it decides what the phases and the dead time rest on
+    moved = pivot_warning(campaign, tracks)
+    if moved:
+        warnings.append(moved)
     fits: dict[str, SineFit] = {}
     amplitudes = []
     for test in campaign.sine_tests:
