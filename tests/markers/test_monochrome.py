@@ -99,3 +99,25 @@ def test_manifest_brightness_markers(tmp_path):
     manifest.write_text(base.replace('brightness = "bright"', 'brightness = "shiny"'))
     with pytest.raises(ServoscopeError, match='"bright" or "dark"'):
         load_campaign(manifest, check_videos=False)
+
+
+def test_an_mraw_of_the_monochrome_twin_tracks_as_its_tiff_sequence(tmp_path):
+    """The issue's target: a high-speed camera's MRAW (written by pyMRAW) and the image sequence of the same
+    12-bit footage give the same track to the last bit."""
+    pyMRAW = pytest.importorskip("pyMRAW")
+    import tifffile
+
+    simulate_campaign(tmp_path, "quick", 0, frequencies_hz=(2.0,), include_step=False, bit_depth=12, **SMALL)
+    folder = tmp_path / "dwell_01_2.00Hz"
+    images = np.stack([tifffile.imread(f) for f in sorted(folder.glob("*.tif"))])
+    assert images.dtype == np.uint16 and images.max() < 4096 and images.max() > 2000  # 12 bits used
+    mraw, cih = pyMRAW.save_mraw(images, str(tmp_path / "rec.cih"), bit_depth=16,
+                                 info_dict={"Record Rate(fps)": 100})
+    settings = TrackerSettings(lead="bright", trail="bright", led="bright", exposure_s=0.01)
+    from servoscope.video import frame_source
+
+    from_tiff = track_video(frame_source(f"{folder}/*.tif", fps=100, bits=12), settings)
+    from_mraw = track_video(cih, settings)
+    for name in ("time_s", "lead_xy_px", "trail_xy_px", "angle_rad", "valid", "led_level", "angle_sigma_rad"):
+        assert np.array_equal(getattr(from_tiff, name), getattr(from_mraw, name), equal_nan=name != "valid"), name
+    assert from_tiff.t0_s == from_mraw.t0_s and from_tiff.n_valid == from_tiff.n_frames
