@@ -278,9 +278,22 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
-    if result.reference_angle_rad is None:
-        import numpy as np
+    _say_frame_of_reference_and_shutter(name, result, exposure_s)
+    for w in result.warnings:
+        click.echo(f"warning: {w}", err=True)
+    if overlay is not None:
+        from .video.overlay import write_overlay
 
+        overlay.parent.mkdir(parents=True, exist_ok=True)
+        write_overlay(video, result, overlay, camera=camera)
+        click.echo(f"wrote {overlay}")
+
+
+def _say_frame_of_reference_and_shutter(name: str, result, exposure_s: float | None) -> None:
+    """The track's lines beyond the counts: the reference line's turn (or a moving pitch axis), the shutter."""
+    import numpy as np  # deferred, as every command's heavy imports are
+
+    if result.reference_angle_rad is None:
         from .angle.pivot import pivot_motion
 
         pivot = pivot_motion(result.lead_xy_px, result.trail_xy_px, result.valid)
@@ -290,8 +303,6 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
                        "shake or roll, or the airframe rocking): a turn of the camera or the airframe is read as pitch; "
                        "film two stickers on the airframe and give them with --reference", err=True)
     else:
-        import numpy as np
-
         motion = result.reference_angle_rad[np.isfinite(result.reference_angle_rad)]
         click.echo(f"{name}: the reference line turned by {math.degrees(float(np.ptp(motion))):.3f}° peak to peak "
                    f"({math.degrees(float(np.std(motion))):.3f}° RMS); taken off the angle")
@@ -300,14 +311,6 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         from .camera.exposure import blur_evidence
 
         click.echo(f"{name}: exposure: {blur_evidence(result).describe()}")
-    for w in result.warnings:
-        click.echo(f"warning: {w}", err=True)
-    if overlay is not None:
-        from .video.overlay import write_overlay
-
-        overlay.parent.mkdir(parents=True, exist_ok=True)
-        write_overlay(video, result, overlay, camera=camera)
-        click.echo(f"wrote {overlay}")
 
 
 @cli.command()
