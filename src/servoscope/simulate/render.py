@@ -1,21 +1,9 @@
 """The digital twin's frame renderer: the scene drawn with exact coverage, the camera's motion and noise.
 
-Polygons are drawn by :mod:`servoscope.simulate.coverage` (exact area coverage,
-below in short). Every polygon is drawn with its *exact* area coverage of each pixel square
-``[x-0.5, x+0.5] x [y-0.5, y+0.5]`` (pixel centres on integers), used as
-alpha. The coverage comes from a signed-area accumulation (the method of
-font rasterizers such as font-rs): each edge is cut where it crosses pixel
-rows and columns; a piece lying in one cell adds its signed height ``dy``
-split between that cell (the trapezoid to the right of the piece) and the
-next cell; a running sum along each row then yields, for every cell, the
-area of the polygon inside it. This is exact for any simple polygon, convex
-or not, costs O(perimeter + bounding-box area), and gives interior pixels a
-coverage of exactly 1 without special cases.
-
-Why not ``cv2.circle(..., LINE_AA)``: OpenCV approximates circles by coarse
-polygons and its anti-aliasing is not area-exact, so the centroid of a drawn
-disk wanders by ~0.07 px with the sub-pixel position — larger than the
-effects servoscope must measure.
+Every part of the scene (blade, stickers, LED, clutter) is drawn with its exact
+area coverage of each pixel (:mod:`servoscope.simulate.coverage`), moved as the
+camera shakes or rolls and the airframe rocks (:func:`picture_motion`,
+:func:`airframe_motion`).
 
 Sensor noise uses a splitmix64 stream (in numba) whose state is drawn per
 frame from a numpy ``SeedSequence([noise_seed, frame_index])``, mapped through
