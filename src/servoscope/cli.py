@@ -313,6 +313,28 @@ def _say_frame_of_reference_and_shutter(name: str, result, exposure_s: float | N
         click.echo(f"{name}: exposure: {blur_evidence(result).describe()}")
 
 
+def _parse_held(fix_text: tuple[str, ...], bound_text: tuple[str, ...]
+                ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    """``--fix NAME=VALUE`` and ``--bound NAME=LOW:HIGH`` as dicts; one clear error for anything else."""
+    fix: dict[str, float] = {}
+    bounds: dict[str, tuple[float, float]] = {}
+    for text in fix_text:
+        name, _, value = text.partition("=")
+        try:
+            fix[name.strip()] = float(value)
+        except ValueError:
+            raise ServoscopeError(f"--fix {text!r}: give NAME=VALUE, e.g. --fix damping_ratio=0.8") from None
+    for text in bound_text:
+        name, _, limits = text.partition("=")
+        low, _, high = limits.partition(":")
+        try:
+            bounds[name.strip()] = (float(low), float(high))
+        except ValueError:
+            raise ServoscopeError(f"--bound {text!r}: give NAME=LOW:HIGH, e.g. --bound natural_frequency_rad_s=20:80") \
+                from None
+    return fix, bounds
+
+
 @cli.command()
 @click.argument("footage", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
@@ -394,15 +416,24 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
 @click.option("--force", is_flag=True, help="Track again even where a cached track exists (tracks are cached in OUT/.cache).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print result.json to stdout.")
+@click.option("--fix", "fix_text", multiple=True, metavar="NAME=VALUE",
+              help="Hold a model parameter at a value (e.g. damping_ratio=0.8); repeatable.")
+@click.option("--bound", "bound_text", multiple=True, metavar="NAME=LOW:HIGH",
+              help="Keep a model parameter within limits (e.g. natural_frequency_rad_s=20:80); repeatable.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
-             workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool) -> None:
+             workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
+             bound_text: tuple[str, ...]) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
     from .report import write_report
+    from .sysid import check_held
 
     order = _parse_order(order_text)
+    fix, bounds = _parse_held(fix_text, bound_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
+    check_held(order, "minimum_phase", {**manifest.model_fix, **fix},
+               {k: v for k, v in {**manifest.model_bounds, **bounds}.items() if k not in fix})
     _check_out_dir(out_dir, manifest)
     failures: dict[str, str] = {}
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
@@ -412,7 +443,8 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
         )
     if failures:
         manifest = manifest.without(failures)
-    result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going)
+    result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
+                          fix=fix or None, bounds=bounds or None)
     paths = write_report(result, out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))

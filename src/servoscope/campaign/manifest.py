@@ -25,7 +25,8 @@ from ..video.frame_source import MANIFEST_KEYS, manifest_frame_source, source_na
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
-_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan"}
+_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model"}
+_MODEL_KEYS = {"fix", "bound"}
 _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
 _MARKER_KEYS = {"lead", "trail", "led", "reference"}
 _INPUT_KEYS = {"units"}
@@ -93,6 +94,9 @@ class Campaign:
     reference : (str, str) or None
         Two stickers on the airframe (``[markers] reference = ["#…", "#…"]``):
         the blade's angle is measured against the line joining them.
+    model_fix, model_bounds : dict
+        Model parameters held at a value or within limits (``[model] fix =
+        {damping_ratio = 0.8}``, ``bound = {natural_frequency_rad_s = [20, 80]}``).
     """
 
     path: Path
@@ -110,6 +114,8 @@ class Campaign:
     trail_near: tuple[float, float] | None = None
     timestamp: str = "middle"
     reference: tuple[str, str] | None = None
+    model_fix: dict[str, float] = field(default_factory=dict)
+    model_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def sine_tests(self) -> list[TestSpec]:
@@ -318,6 +324,27 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         problems.add("input.units", "must be text")
         units = "normalized"
 
+    model_t = problems.table(data, "model")
+    problems.unknown("model", model_t.keys(), _MODEL_KEYS)
+    model_fix: dict[str, float] = {}
+    model_bounds: dict[str, tuple[float, float]] = {}
+    # Parameters held, as lmfit's vary=False / min, max: [model] fix = {damping_ratio = 0.8},
+    # bound = {natural_frequency_rad_s = [20, 80]}; their names are checked when the model's order is known.
+    for name, value in (model_t.get("fix") or {}).items() if isinstance(model_t.get("fix", {}), dict) else ():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            model_fix[name] = float(value)
+        else:
+            problems.add(f"model.fix.{name}", f"must be a number, got {value!r}")
+    for name, value in (model_t.get("bound") or {}).items() if isinstance(model_t.get("bound", {}), dict) else ():
+        if (isinstance(value, list) and len(value) == 2
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value) and value[0] < value[1]):
+            model_bounds[name] = (float(value[0]), float(value[1]))
+        else:
+            problems.add(f"model.bound.{name}", f"must be [low, high] with low < high, got {value!r}")
+    for key in ("fix", "bound"):
+        if key in model_t and not isinstance(model_t[key], dict):
+            problems.add(f"model.{key}", "must be a table: {name = value, …}")
+
     analysis_t = problems.table(data, "analysis")
     problems.unknown("analysis", analysis_t.keys(), _ANALYSIS_KEYS)
     settle = problems.number("analysis.settle_s", analysis_t.get("settle_s", 0.5), nonnegative=True)
@@ -451,4 +478,6 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         trail_near=near["trail"],
         timestamp=str(timestamp),
         reference=reference,
+        model_fix=model_fix,
+        model_bounds=model_bounds,
     )

@@ -66,6 +66,10 @@ def track_campaign(
     failures : dict, optional
         Filled with label → reason for the videos left out.
     progress : callable(label, frames_done, test_index), optional
+    fix, bounds : dict, optional
+        Model parameters held at a value or within limits (see
+        :func:`~servoscope.sysid.fit_transfer_function`); they add to (and
+        override) the manifest's ``[model]`` section.
         In-process: every 50 frames and at each video's end; on Dask: once
         per video, as its track arrives.
     workers : int or None
@@ -294,6 +298,8 @@ def identify(
     bootstrap: int = 0,
     keep_going: bool = False,
     progress: ProgressFn | None = None,
+    fix: dict[str, float] | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
     **track_options,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -403,7 +409,10 @@ def identify(
             f"{campaign.path}: a complex fit needs every dwell's input start (an LED or t0_s); use --fit magnitude"
         )
     mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
-    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0)
+    held_fix = {**campaign.model_fix, **(fix or {})}
+    held_bounds = {k: v for k, v in {**campaign.model_bounds, **(bounds or {})}.items() if k not in (fix or {})}
+    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=held_fix or None,
+                                  bounds=held_bounds or None)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
 

@@ -134,7 +134,11 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
             # With the input-start timing the dwells may share (not in the fit's own error).
             lo_hi, err = phase_dead["ci95_s"], phase_dead["stderr_s"]
         value_text, err_text = format_with_uncertainty(model.params.get(name), err)
-        row = [PARAM_LABELS.get(name, name), value_text, err_text,
+        held = model.held.get(name, {})
+        label = PARAM_LABELS.get(name, name) + (
+            " (held fixed)" if "fixed" in held else
+            f" (bounded {held['bounds'][0]:.4g}–{held['bounds'][1]:.4g})" if "bounds" in held else "")
+        row = [label, value_text, err_text,
                "—" if lo_hi is None else format_interval(lo_hi[0], lo_hi[1], err)]
         if boot:
             b = boot.get(name)

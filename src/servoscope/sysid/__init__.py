@@ -24,6 +24,7 @@ Modules, each importing only those below it:
 * step tests: ``step`` (analyse_step).
 """
 
+from servoscope.sysid._fixed_order import check_held
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
 from servoscope.sysid.sine import SineFit, fit_sine, hac_covariance, rigid_motion_null
@@ -44,6 +45,7 @@ __all__ = [
     "TransferFunctionFit",
     "analyse_step",
     "bandwidth_rad_s",
+    "check_held",
     "cifer_cost",
     "estimate_slope_db_per_decade",
     "fit_second_order",

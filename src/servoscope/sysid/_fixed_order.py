@@ -26,7 +26,7 @@ from servoscope.sysid._tf_resample import bootstrap_dwells, with_jackknife
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.tf_result import TransferFunctionFit
 
-__all__ = ["check_fit_options", "check_order", "fit_fixed_order"]
+__all__ = ["check_fit_options", "check_held", "check_order", "fit_fixed_order"]
 
 
 def check_fit_options(who: str, mode: str, zeros: str, bootstrap: int) -> None:
@@ -41,6 +41,25 @@ def check_fit_options(who: str, mode: str, zeros: str, bootstrap: int) -> None:
         )
     if int(bootstrap) < 0:
         raise ServoscopeError(f"{who}: bootstrap must be >= 0, got {bootstrap!r}")
+
+
+def check_held(order: Any, zeros: str, fix: dict[str, float], bounds: dict[str, tuple[float, float]]) -> None:
+    """Raise :class:`~servoscope.errors.ServoscopeError` for held parameters a model of ``order`` cannot take.
+
+    Checked before any tracking, against the complex fit's names (a ``dead_time_s`` held in a
+    magnitude fit is refused by the fit itself).
+    """
+    if not (fix or bounds):
+        return
+    if isinstance(order, str):
+        raise ServoscopeError("fixed or bounded parameters need a given order (their names depend on it), "
+                              "not order='auto'")
+    nb, na = check_order(order)
+    try:
+        Structure(nb, na, zeros, True, 1.0).with_held(
+            {k: float(v) for k, v in fix.items()}, {k: (float(v[0]), float(v[1])) for k, v in bounds.items()})
+    except (ValueError, TypeError, IndexError) as exc:
+        raise ServoscopeError(f"model of order ({nb}, {na}): {exc}") from None
 
 
 def check_order(order: Any) -> tuple[int, int]:
@@ -65,6 +84,8 @@ def fit_fixed_order(
     n_starts: int | None = None,
     jackknife: bool = True,
     who: str = "fit_transfer_function",
+    fix: dict[str, float] | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
 ) -> TransferFunctionFit:
     """Fit a model of the given order ``(nb, na)``; the options as :func:`~servoscope.sysid.fit_transfer_function`'s.
 
@@ -79,16 +100,24 @@ def fit_fixed_order(
     # way; every result is checked for finiteness below, so numpy's warnings
     # would only be noise (and errors under pytest's filter).
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        return _fit_fixed_order(fr, nb, na, mode, zeros, bootstrap, seed, n_starts, who, jackknife)
+        return _fit_fixed_order(fr, nb, na, mode, zeros, bootstrap, seed, n_starts, who, jackknife,
+                                dict(fix or {}), dict(bounds or {}))
 
 
 def _fit_fixed_order(
     fr: FrequencyResponse, nb: int, na: int, mode: str, zeros: str, bootstrap: int,
     seed: int | None, n_starts: int | None, who: str, jackknife: bool = True,
+    fix: dict[str, float] | None = None, bounds: dict[str, tuple[float, float]] | None = None,
 ) -> TransferFunctionFit:
     d, warns = prepare_fit_data(fr, mode, who)
     w_ref = float(math.exp(np.mean(np.log(d.w)))) if d.n else 1.0
     st = Structure(nb, na, zeros, mode == "complex", w_ref)
+    if fix or bounds:
+        try:
+            st = st.with_held({k: float(v) for k, v in (fix or {}).items()},
+                              {k: (float(v[0]), float(v[1])) for k, v in (bounds or {}).items()})
+        except (ValueError, TypeError, IndexError) as exc:
+            raise ServoscopeError(f"{who}: {exc}") from None
     problem = identifiability_problem(d, st, mode)
     if problem is not None:
         raise ServoscopeError(f"{who}: {problem}")
@@ -100,6 +129,14 @@ def _fit_fixed_order(
     if sol is None:
         raise ServoscopeError(f"{who}: the optimizer failed from every starting point (non-finite data?)")
     fit = build_fit(st, d, fr, sol, mode, warns)
+    if fix or bounds:
+        held = {**{k: {"fixed": float(v)} for k, v in (fix or {}).items()},
+                **{k: {"bounds": [float(v[0]), float(v[1])]} for k, v in (bounds or {}).items()}}
+        at_bound = [k for k, (lo, hi) in (bounds or {}).items()
+                    if math.isclose(fit.params[k], lo, rel_tol=1e-6) or math.isclose(fit.params[k], hi, rel_tol=1e-6)]
+        more = tuple(f"{k} ended at its bound ({fit.params[k]:.6g}): the data would take it further; its "
+                     "standard error and interval do not say how far" for k in at_bound)
+        fit = replace(fit, held=held, warnings=fit.warnings + more)
     if jackknife:
         fit = with_jackknife(fit, d)
     if bootstrap:

@@ -59,6 +59,8 @@ class Structure:
     zeros: str  # "minimum_phase" or "free"
     delay: bool
     w_ref: float  # rad/s, scale of the free numerator coefficients
+    # Parameters the user held: (index, low, high) in theta's units; low == high fixes it.
+    held: tuple[tuple[int, float, float], ...] = ()
 
     # ------------------------------------------------------------ layout
     @property
@@ -160,7 +162,62 @@ class Structure:
             else:
                 lo.append(-np.inf)
                 hi.append(np.inf)
-        return np.array(lo), np.array(hi)
+        lo_a, hi_a = np.array(lo), np.array(hi)
+        for i, low, high in self.held:
+            lo_a[i], hi_a[i] = low, high
+        return lo_a, hi_a
+
+    @property
+    def fixed(self) -> NDArray[np.bool_]:
+        """Which parameters are held at one value (their limits meet)."""
+        out = np.zeros(self.n_params, dtype=bool)
+        for i, low, high in self.held:
+            out[i] = low == high
+        return out
+
+    def with_held(self, fixed: dict[str, float], bounds: dict[str, tuple[float, float]]) -> "Structure":
+        """This layout with parameters held at a value (``fixed``) or within limits (``bounds``), physical units.
+
+        Raises
+        ------
+        ValueError
+            A name this model does not have, a parameter both fixed and bounded, a value its
+            kind cannot take (a frequency, gain or damping ratio ≤ 0, a negative dead time),
+            or limits in the wrong order; the message says which.
+        """
+        names = self.names()
+        held = []
+        for name in set(fixed) | set(bounds):
+            if name not in names:
+                raise ValueError(f"{name!r} is not a parameter of this model ({', '.join(names)})")
+            if name in fixed and name in bounds:
+                raise ValueError(f"{name!r} is both fixed and bounded: give one")
+        for name in names:
+            if name not in fixed and name not in bounds:
+                continue
+            i = names.index(name)
+            low, high = (fixed[name], fixed[name]) if name in fixed else bounds[name]
+            kind = self.kinds()[i]
+            if not (math.isfinite(low) and math.isfinite(high) and low <= high):
+                raise ValueError(f"{name!r}: limits {low}:{high} must be finite and in order")
+            if (kind in ("gain", "freq", "zeta") and low <= 0) or (kind == "tau" and low < 0):
+                raise ValueError(f"{name!r} must be {'> 0' if kind != 'tau' else '>= 0'}, got {low}")
+            values = np.zeros(self.n_params)
+            ends = []
+            for v in (low, high):
+                values[i] = v
+                ends.append(float(self.theta_from_physical_one(i, v)))
+            held.append((i, ends[0], ends[1]))
+        return Structure(self.nb, self.na, self.zeros, self.delay, self.w_ref, tuple(held))
+
+    def theta_from_physical_one(self, i: int, value: float) -> float:
+        """Theta's entry ``i`` for a physical value (see :meth:`theta_from_physical`)."""
+        kind = self.kinds()[i]
+        if kind in ("gain", "freq", "zeta"):
+            return math.log(value)
+        if kind == "coef":
+            return value / self.w_ref ** -(i - self.offsets()["zc"] + 1)
+        return math.sqrt(max(value, 0.0))
 
     def physical(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Physical values and d(physical)/d(theta) (diagonal) for a theta."""
@@ -181,16 +238,7 @@ class Structure:
 
     def theta_from_physical(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
         """The theta whose :meth:`physical` values are `values` (names' order): a saved fit's parameters back."""
-        theta = np.empty(len(values))
-        zc = self.offsets()["zc"]
-        for i, (kind, v) in enumerate(zip(self.kinds(), values)):
-            if kind in ("gain", "freq", "zeta"):
-                theta[i] = math.log(v)
-            elif kind == "coef":
-                theta[i] = v / self.w_ref ** -(i - zc + 1)
-            else:  # tau = u**2
-                theta[i] = math.sqrt(max(v, 0.0))
-        return theta
+        return np.array([self.theta_from_physical_one(i, float(v)) for i, v in enumerate(values)])
 
     def canonical(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
         """Sort quadratic pole factors by natural frequency (names are then unique); u >= 0."""

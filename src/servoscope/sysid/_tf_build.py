@@ -64,17 +64,22 @@ def build_fit(
     theta = canonical_in_bounds(st, d, sol.x)
     r = residuals(st, d, theta, use_phase)
     J = residual_jacobian(st, d, theta, use_phase)
-    m, p = r.size, theta.size
+    # Parameters the user fixed are not estimated: no error, no degree of freedom.
+    free = ~st.fixed
+    m, p = r.size, int(np.count_nonzero(free))
     dof = m - p
     chi2 = float(r @ r)
     warns = list(warns)
+    Jf = J[:, free]
+    cov_int = np.zeros((theta.size, theta.size))
     try:
-        cov_int = np.linalg.inv(J.T @ J)
-        if not np.all(np.isfinite(cov_int)):
+        cov_free = np.linalg.inv(Jf.T @ Jf)
+        if not np.all(np.isfinite(cov_free)):
             raise np.linalg.LinAlgError
     except np.linalg.LinAlgError:
-        cov_int = np.linalg.pinv(J.T @ J)
+        cov_free = np.linalg.pinv(Jf.T @ Jf)
         warns.append("singular Jacobian: standard errors are unreliable (too many parameters for the data?)")
+    cov_int[np.ix_(free, free)] = cov_free
     if dof > 0:
         # Stated errors are trusted unless the misfit says they are too
         # small; without any, the scatter alone sets the scale (nlinfit).

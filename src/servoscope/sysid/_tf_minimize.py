@@ -55,7 +55,7 @@ def residual_jacobian(
     lo, hi = limits if limits is not None else _limits(st, d)
     clipped = np.clip(theta, lo, hi)
     J = log_response_jac(st, clipped, d.w)
-    J[:, clipped != theta] = 0.0
+    J[:, (clipped != theta) | (lo == hi)] = 0.0  # clipped, or held fixed by the user
     jm = J.real / d.sig_ln[:, None]
     if not use_phase:
         return jm

@@ -136,6 +136,8 @@ def fit_transfer_function(
     max_order: int = 4,
     n_starts: int | None = None,
     jackknife: bool = True,
+    fix: dict[str, float] | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
 ) -> TransferFunctionFit:
     """Fit ``K * N(s)/D(s) * exp(-s*tau)`` of order ``(nb, na)`` to a frequency response.
 
@@ -173,6 +175,13 @@ def fit_transfer_function(
         Check the standard errors by refitting with each dwell left out (see
         the module docstring); ``select_order`` skips it for the candidates
         and does it for the chosen one.
+    fix : dict of str to float, optional
+        Parameters held at a value, by name (``{"damping_ratio": 0.8}``), as
+        lmfit's ``vary=False``: not estimated, standard error 0, not counted
+        in the degrees of freedom, AIC or BIC. Needs a given order.
+    bounds : dict of str to (float, float), optional
+        Parameters kept within limits (physical units, ``{"natural_frequency_rad_s":
+        (20, 80)}``); one that ends at a limit earns a warning. Needs a given order.
 
     Returns
     -------
@@ -191,6 +200,9 @@ def fit_transfer_function(
     if isinstance(order, str):
         if order != "auto":
             raise ServoscopeError(f"{who}: order must be (nb, na) or 'auto', got {order!r}")
+        if fix or bounds:
+            raise ServoscopeError(f"{who}: fixed or bounded parameters need a given order (their names depend "
+                                  "on it), not order='auto'")
         sel = select_order(fr, mode=mode, max_order=max_order, zeros=zeros)
         best = sel.best
         if bootstrap:
@@ -201,7 +213,7 @@ def fit_transfer_function(
                 best = with_jackknife(best, prepare_fit_data(fr, mode, who)[0])
         return replace(best, order_selection=sel)
     return fit_fixed_order(fr, order, mode=mode, zeros=zeros, bootstrap=bootstrap, seed=seed, n_starts=n_starts,
-                           jackknife=jackknife, who=who)
+                           jackknife=jackknife, who=who, fix=fix, bounds=bounds)
 
 
 def fit_second_order(

@@ -108,6 +108,12 @@ class TransferFunctionFit:
     stderr_jackknife : dict of str to float or None
         Delete-one-dwell jackknife standard errors (None when there are too
         few dwells, fewer than ``n_params + 2``).
+    held : dict of str to dict
+        Parameters the user held, as lmfit's ``vary=False`` and ``min``/``max``:
+        ``{"damping_ratio": {"fixed": 0.8}}`` or ``{"natural_frequency_rad_s":
+        {"bounds": [20, 80]}}``. A fixed one has standard error 0 and its
+        interval is its value; `n_params`, the degrees of freedom, AIC and BIC
+        count the free ones only.
     influence : dict of str to dict or None
         Per parameter, the dwell whose removal moves it most:
         ``{"dwell": label, "without": value, "shift_stderr": (value without
@@ -148,6 +154,7 @@ class TransferFunctionFit:
     stderr_jacobian: dict[str, float] = field(default_factory=dict, repr=False)
     stderr_jackknife: dict[str, float] | None = field(default=None, repr=False)
     influence: dict[str, dict[str, Any]] | None = field(default=None, repr=False)
+    held: dict[str, dict[str, Any]] = field(default_factory=dict, repr=False)
     _structure: Structure | None = field(default=None, repr=False, compare=False)
     _theta: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
@@ -280,6 +287,7 @@ class TransferFunctionFit:
                 "residual_rms_deg": self.residual_rms_deg,
                 "n_points": self.n_points,
                 "undetermined": list(self.undetermined),
+                "held": {k: dict(v) for k, v in self.held.items()},
                 "warnings": list(self.warnings),
                 # The parameters' covariance, rows and columns in `params`' order.
                 "covariance": np.asarray(self.covariance, dtype=float),
