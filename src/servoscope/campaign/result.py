@@ -20,6 +20,7 @@ from ..camera.exposure import ExposureEstimate
 from ..markers.track import Track
 from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
+from ..sysid.linearity import AmplitudeCheck
 from ..sysid.model_text import model_equation
 from ..sysid.step import unit_step_function
 from .manifest import Campaign, TestSpec
@@ -119,6 +120,9 @@ class IdentificationResult:
     shared_t0_stderr_s : float
         The part of the dwells' t0 uncertainty they may share (see
         :func:`shared_t0_stderr`), added to the phase dead time's.
+    amplitude_checks : list of AmplitudeCheck
+        Each frequency measured at several input amplitudes, its gains compared
+        (:func:`~servoscope.sysid.gain_against_amplitude`); empty otherwise.
     """
 
     campaign: Campaign
@@ -131,6 +135,7 @@ class IdentificationResult:
     warnings: list[str] = field(default_factory=list)
     exposure: ExposureEstimate | None = None
     shared_t0_stderr_s: float = 0.0
+    amplitude_checks: list[AmplitudeCheck] = field(default_factory=list)
 
     @property
     def transfer_function(self):
@@ -225,6 +230,8 @@ class IdentificationResult:
                 "dead_time": {**estimates, "source": {"step test": "step", "frequency response (phase)": "phase"}.get(
                     self.dead_time_source or "")},
                 "exposure": None if self.exposure is None else self.exposure.summary(),
+                **({"gain_against_amplitude": [c.summary() for c in self.amplitude_checks]}
+                   if self.amplitude_checks else {}),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
                 "tests": tests,
@@ -350,8 +357,9 @@ class IdentificationResult:
                                              unit_step=unit_step)
         exposure = None if data.get("exposure") is None else ExposureEstimate.from_summary(data["exposure"])
         shared = (data.get("dead_time", {}).get("phase") or {}).get("shared_t0_stderr_s") or 0.0
+        checks = [AmplitudeCheck.from_summary(c) for c in data.get("gain_against_amplitude", [])]
         return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
-                   list(data.get("warnings", [])), exposure, float(shared))
+                   list(data.get("warnings", [])), exposure, float(shared), checks)
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

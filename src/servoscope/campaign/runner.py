@@ -24,6 +24,7 @@ from ..sysid import (
     analyse_step,
     fit_sine,
     fit_transfer_function,
+    gain_against_amplitude,
     rigid_motion_null,
 )
 from .manifest import Campaign, TestSpec, load_campaign
@@ -408,6 +409,16 @@ def identify(
         raise ServoscopeError(
             f"{campaign.path}: a complex fit needs every dwell's input start (an LED or t0_s); use --fit magnitude"
         )
+    # Amplitude as a test axis: one frequency's dwells at several amplitudes must agree if the servo is linear.
+    # (The response is sorted by frequency: each dwell's amplitude and systematic error go by its label.)
+    input_amplitude = dict(zip(fits, amplitudes))
+    systematic = {}
+    for label, sine_fit in fits.items():
+        noise = tracks[label].summary().get("angle_noise_measured_rad")
+        systematic[label] = noise / sine_fit.amplitude if noise and sine_fit.amplitude > 0 else 0.0
+    amplitude_checks = gain_against_amplitude(fr, [input_amplitude[label] for label in fr.labels],
+                                              [systematic[label] for label in fr.labels])
+    warnings.extend(w for w in (c.warning() for c in amplitude_checks) if w)
     mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
     held_fix = {**campaign.model_fix, **(fix or {})}
     held_bounds = {k: v for k, v in {**campaign.model_bounds, **(bounds or {})}.items() if k not in (fix or {})}
@@ -460,4 +471,5 @@ def identify(
     disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
     if disagreement:
         warnings.append(disagreement)
-    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s)
+    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
+                                amplitude_checks)

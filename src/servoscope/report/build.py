@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .figures import bode_figure, dwell_figure, overlay_figure, step_figure
+from .figures import amplitude_figure, bode_figure, dwell_figure, overlay_figure, step_figure
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -192,6 +192,14 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
+    if result.amplitude_checks:
+        verdicts = "; ".join(f"{c.frequency_hz:.3g} Hz: {100 * c.change:+.2f} % from {c.amplitudes[0]:g} to "
+                             f"{c.amplitudes[-1]:g} (p = {c.p_value:.2g}, {'linear' if c.linear else 'NOT linear'})"
+                             for c in result.amplitude_checks)
+        s.figure(amplitude_figure(result.amplitude_checks),
+                 f"Each frequency's gains at its input amplitudes, against their weighted mean: a linear servo's agree "
+                 f"within their errors (χ² test, not linear below p = 0.001). {verdicts}.",
+                 "Gain against input amplitude", name="amplitude")
     dwell_rows = []
     fits_in_order = [result.sine_fits.get(label) for label in fr.labels]
     checked = any(f is not None and f.codec_gain_bias is not None for f in fits_in_order)

@@ -26,7 +26,7 @@ from ..sysid.plotting import (  # noqa: E402
     plot_step,
 )
 
-__all__ = ["bode_figure", "dwell_figure", "step_figure", "overlay_figure", "segmentation_figure"]
+__all__ = ["amplitude_figure", "bode_figure", "dwell_figure", "step_figure", "overlay_figure", "segmentation_figure"]
 
 
 def bode_figure(
@@ -200,5 +200,29 @@ def segmentation_figure(
             ax.plot([x], [y], "s", ms=5, mfc="none", mec="white", mew=1.2)
     for ax in axes:
         ax.set_axis_off()
+    fig.tight_layout()
+    return fig
+
+
+def amplitude_figure(checks) -> Figure:
+    """Gain against input amplitude at each frequency measured at several (the linearity check).
+
+    Each frequency's gains relative to their weighted mean (%, ±1 standard error): a
+    linear servo's lie on 0 at every amplitude.
+    """
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for c in checks:
+        g, se = np.asarray(c.gains), np.asarray(c.gain_stderrs)
+        w = 1.0 / se**2
+        mean = float(np.sum(w * g) / np.sum(w))
+        ax.errorbar(c.amplitudes, 100.0 * (g / mean - 1.0), yerr=100.0 * se / mean, marker="o", capsize=3,
+                    label=f"{c.frequency_hz:.3g} Hz" + ("" if c.linear else " (not linear)"))
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlabel("input amplitude (input units)")
+    ax.set_ylabel("gain against its mean (%)")
+    ax.set_title("Gain against input amplitude (linearity check)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     return fig

@@ -24,6 +24,9 @@ __all__ = ["plan", "drive"]
 @click.option("--to", "to_hz", type=float, required=True, help="Highest dwell frequency, Hz.")
 @click.option("--points", default=14, show_default=True, type=int, help="Number of log-spaced frequencies.")
 @click.option("--amplitude", default=0.1, show_default=True, type=float, help="Sine amplitude, input units.")
+@click.option("--amplitudes", "amplitudes_text", metavar="A,B,…",
+              help="Amplitude as a test axis: dwells at every frequency for each amplitude (e.g. 0.05,0.1,0.2); "
+                   "identify compares each frequency's gains (the linearity check).")
 @click.option("--periods", default=8.0, show_default=True, type=float, help="Periods per dwell after settling.")
 @click.option("--min-seconds", default=3.0, show_default=True, type=float, help="Shortest input duration, s.")
 @click.option("--settle", "settle_s", default=1.0, show_default=True, type=float,
@@ -47,10 +50,19 @@ __all__ = ["plan", "drive"]
 def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float, periods: float,
          min_seconds: float, settle_s: float, update_hz: float, step: bool, step_amplitude: float,
          step_seconds: float, lead_in_s: float, tail_s: float, rest_s: float, lead: str, trail: str,
-         led: str, units: str, out: Path) -> None:
+         led: str, units: str, out: Path, amplitudes_text: str | None) -> None:
     """Plan a log-spaced sine sweep and a step test; write a campaign.toml without videos."""
+    from ..errors import ServoscopeError
     from ..markers.colour import parse_colour
     from .plan import plan_sweep, write_plan
+
+    amplitudes = None
+    if amplitudes_text is not None:
+        try:
+            amplitudes = [float(a) for a in amplitudes_text.split(",")]
+        except ValueError:
+            raise ServoscopeError(f"--amplitudes {amplitudes_text!r}: give numbers separated by commas, e.g. "
+                                  "0.05,0.1,0.2") from None
 
     for option, colour in (("--lead", lead), ("--trail", trail), ("--led", led)):
         parse_colour(colour, what=option)
@@ -58,7 +70,7 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
         fps, from_hz, to_hz, points=points, amplitude=amplitude, periods=periods, min_seconds=min_seconds,
         settle_s=settle_s, update_hz=update_hz, step=step, step_amplitude=step_amplitude,
         step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s,
-        markers={"lead": lead, "trail": trail, "led": led}, units=units,
+        markers={"lead": lead, "trail": trail, "led": led}, units=units, amplitudes=amplitudes,
     )
     write_plan(sweep, out)
     for i, d in enumerate(sweep.dwells, start=1):

@@ -26,6 +26,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -282,6 +283,7 @@ def plan_sweep(
     rest_s: float = 2.0,
     markers: dict[str, str] | None = None,
     units: str = "normalized",
+    amplitudes: Sequence[float] | None = None,
 ) -> SweepPlan:
     """Plan a log-spaced sine sweep and a final step test.
 
@@ -315,6 +317,11 @@ def plan_sweep(
         ``[markers]`` colours (default: red lead, green trail, yellow LED).
     units : str
         ``[input] units``.
+    amplitudes : sequence of float, optional
+        Amplitude as a test axis: a dwell at every frequency for each of
+        these amplitudes (frequency by frequency, smallest first), instead of
+        ``amplitude`` alone; ``servoscope identify`` then compares each
+        frequency's gains (the linearity check).
 
     Returns
     -------
@@ -330,6 +337,11 @@ def plan_sweep(
     to_hz = _positive(to_hz, "--to")
     update_hz = _positive(update_hz, "--update-hz")
     amplitude = _positive(amplitude, "--amplitude")
+    levels = [amplitude]
+    if amplitudes is not None:
+        levels = sorted(_positive(a, "--amplitudes") for a in amplitudes)
+        if not levels or len(set(levels)) != len(levels):
+            raise ServoscopeError(f"--amplitudes {','.join(f'{a:g}' for a in amplitudes)}: give distinct amplitudes")
     periods = _positive(periods, "--periods")
     min_seconds = _positive(min_seconds, "--min-seconds", allow_zero=True)
     settle_s = _positive(settle_s, "--settle", allow_zero=True)
@@ -357,7 +369,9 @@ def plan_sweep(
     dwells = []
     for f in freqs_hz:
         duration = dwell_duration_s(f, periods, settle_s, min_seconds)
-        dwells.append(Dwell("sine", amplitude, f, duration, tuple(frequency_warnings(f, fps, update_hz, duration - settle_s))))
+        for level in levels:
+            dwells.append(Dwell("sine", level, f, duration,
+                                tuple(frequency_warnings(f, fps, update_hz, duration - settle_s))))
     if step:
         dwells.append(Dwell("step", float(step_amplitude), None, max(step_seconds, min_seconds)))
     return SweepPlan(

@@ -376,15 +376,20 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
 
-    # (video name, kind, frequency) per test, in recording order.
-    plan: list[tuple[str, str, float | None]] = [
-        (f"dwell_{k + 1:02d}_{f:.2f}Hz{suffix}", "sine", f) for k, f in enumerate(p.frequencies_hz)]
+    # (video name, kind, frequency, sine amplitude) per test, in recording order.
+    if p.sine_amplitudes:
+        pairs = [(f, a) for f in p.frequencies_hz for a in p.sine_amplitudes]
+        plan: list[tuple[str, str, float | None, float]] = [
+            (f"dwell_{k + 1:02d}_{f:.2f}Hz_a{a:g}{suffix}", "sine", f, a) for k, (f, a) in enumerate(pairs)]
+    else:
+        plan = [(f"dwell_{k + 1:02d}_{f:.2f}Hz{suffix}", "sine", f, p.sine_amplitude)
+                for k, f in enumerate(p.frequencies_hz)]
     if p.include_step:
-        plan.append((f"step{suffix}", "step", None))
+        plan.append((f"step{suffix}", "step", None, p.step_amplitude))
     streams = np.random.SeedSequence(seed).spawn(len(plan))
 
     tests = []
-    for k, ((name, kind, freq), ss) in enumerate(zip(plan, streams)):
+    for k, ((name, kind, freq, amplitude), ss) in enumerate(zip(plan, streams)):
         if progress is not None:
             progress(k, len(plan), name)
         rng = np.random.default_rng(ss)
@@ -399,7 +404,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
         noise_seed = int(rng.integers(0, 2**63 - 1))
         if kind == "sine":
-            signal = InputSignal("sine", p.sine_amplitude, freq, t0_s=t0)
+            signal = InputSignal("sine", amplitude, freq, t0_s=t0)
             duration = p.dwell_duration_s(freq, t0)
         else:
             signal = InputSignal("step", p.step_amplitude, t0_s=t0)
@@ -440,7 +445,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
             **{k: getattr(p, k) for k in ("flicker_hz", "flicker_depth", "flicker_phase_rad", "shake_px", "shake_smooth_frames",
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
                                           "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
-                                          "reference_stickers", "monochrome",
+                                          "reference_stickers", "monochrome", "sine_amplitudes",
                                           "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },

@@ -138,6 +138,10 @@ class CampaignPreset:
         :data:`servoscope.defaults.REFERENCE_COLOURS`, 1.3× the blade's), which
         campaign.toml names as ``[markers] reference``: the blade's angle is then
         measured against the line joining them.
+    sine_amplitudes : tuple of float or None
+        Amplitude as a test axis: a dwell at every frequency for each of these
+        input amplitudes (frequency by frequency), instead of ``sine_amplitude``
+        alone; the linearity check compares their gains.
     monochrome : bool
         A monochrome high-speed camera: each frame is the scene's BT.601 luma
         at ``bit_depth`` bits (sensor noise scaled with it), written as an image
@@ -199,6 +203,7 @@ class CampaignPreset:
     reference_stickers: bool = False
     monochrome: bool = False
     bit_depth: int = 8
+    sine_amplitudes: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         self._check_camera_options()
@@ -243,6 +248,11 @@ class CampaignPreset:
             raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
         if self.frames_format not in (None, "tiff16"):
             raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
+        if self.sine_amplitudes is not None:
+            amps = tuple(float(a) for a in self.sine_amplitudes)
+            if not amps or any(not (a > 0 and math.isfinite(a)) for a in amps) or len(set(amps)) != len(amps):
+                raise ServoscopeError(f"sine_amplitudes must be distinct amplitudes > 0, not {self.sine_amplitudes!r}")
+            object.__setattr__(self, "sine_amplitudes", amps)
         for name in ("roll", "rock"):
             amp, hz = getattr(self, f"{name}_rad"), getattr(self, f"{name}_hz")
             if not (math.isfinite(amp) and math.isfinite(hz) and hz > 0 and abs(amp) < 0.5):

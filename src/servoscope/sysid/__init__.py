@@ -26,6 +26,7 @@ Modules, each importing only those below it:
 
 from servoscope.sysid._fixed_order import check_held
 from servoscope.sysid.frequency_response import FrequencyResponse
+from servoscope.sysid.linearity import AmplitudeCheck, gain_against_amplitude
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
 from servoscope.sysid.sine import SineFit, fit_sine, hac_covariance, rigid_motion_null
 from servoscope.sysid.step import StepAnalysis, analyse_step, model_step_metrics
@@ -38,6 +39,7 @@ from servoscope.sysid.tf_fit import (
 )
 
 __all__ = [
+    "AmplitudeCheck",
     "FrequencyResponse",
     "OrderSelection",
     "SineFit",
@@ -51,6 +53,7 @@ __all__ = [
     "fit_second_order",
     "fit_sine",
     "fit_transfer_function",
+    "gain_against_amplitude",
     "hac_covariance",
     "model_step_metrics",
     "rigid_motion_null",
