@@ -70,23 +70,7 @@ def build_fit(
     dof = m - p
     chi2 = float(r @ r)
     warns = list(warns)
-    Jf = J[:, free]
-    cov_int = np.zeros((theta.size, theta.size))
-    try:
-        cov_free = np.linalg.inv(Jf.T @ Jf)
-        if not np.all(np.isfinite(cov_free)):
-            raise np.linalg.LinAlgError
-    except np.linalg.LinAlgError:
-        cov_free = np.linalg.pinv(Jf.T @ Jf)
-        warns.append("singular Jacobian: standard errors are unreliable (too many parameters for the data?)")
-    cov_int[np.ix_(free, free)] = cov_free
-    if dof > 0:
-        # Stated errors are trusted unless the misfit says they are too
-        # small; without any, the scatter alone sets the scale (nlinfit).
-        cov_int = cov_int * (max(1.0, chi2 / dof) if d.stated else chi2 / dof)
-    else:
-        cov_int = np.full_like(cov_int, np.nan)
-        warns.append("no degrees of freedom left: standard errors unavailable")
+    cov_int = _internal_covariance(J, free, chi2, dof, d.stated, warns)
     vals, der = st.physical(theta)
     cov = der[:, None] * cov_int * der[None, :]
     diag = np.diag(cov)
@@ -145,6 +129,27 @@ def build_fit(
         _structure=st,
         _theta=readonly(theta),
     )
+
+
+def _internal_covariance(J: NDArray[np.float64], free: NDArray[np.bool_], chi2: float, dof: int, stated: bool,
+                         warns: list[str]) -> NDArray[np.float64]:
+    """Theta's covariance from the Jacobian's free columns (Birge-scaled), zero for the held ones; warnings appended."""
+    Jf = J[:, free]
+    cov_int = np.zeros((J.shape[1], J.shape[1]))
+    try:
+        cov_free = np.linalg.inv(Jf.T @ Jf)
+        if not np.all(np.isfinite(cov_free)):
+            raise np.linalg.LinAlgError
+    except np.linalg.LinAlgError:
+        cov_free = np.linalg.pinv(Jf.T @ Jf)
+        warns.append("singular Jacobian: standard errors are unreliable (too many parameters for the data?)")
+    cov_int[np.ix_(free, free)] = cov_free
+    if dof <= 0:
+        warns.append("no degrees of freedom left: standard errors unavailable")
+        return np.full_like(cov_int, np.nan)
+    # Stated errors are trusted unless the misfit says they are too
+    # small; without any, the scatter alone sets the scale (nlinfit).
+    return cov_int * (max(1.0, chi2 / dof) if stated else chi2 / dof)
 
 
 def _undetermined(
