@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PIVOT_MOTION_WARN_PX", "PivotMotion", "pivot_motion"]
+__all__ = ["PIVOT_MOTION_WARN_PX", "PivotMotion", "heave_px", "pivot_motion"]
 
 #: The axis moving more than this (RMS px, and 10 centroid σ) earns a warning where no reference
 #: stickers take the picture's own turn off the angle: six times what H.264 shows of a steady one.
@@ -86,3 +86,22 @@ def pivot_motion(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndar
                       s * (p[0] - m0[0]) + c * (p[1] - m0[1]) + mid[:, 1]], axis=1)
     spread = moved - moved.mean(axis=0)
     return PivotMotion((float(p[0]), float(p[1])), float(np.sqrt(np.mean(np.sum(spread**2, axis=1)))), swing)
+
+
+def heave_px(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndarray, centre_xy_px) -> np.ndarray:
+    """The blade's heave per frame (px, up positive): the markers' line's distance from the pitch axis.
+
+    A rigid blade turning about the axis keeps its chord line at one distance from it;
+    a blade that flaps moves the line across itself. ``centre_xy_px`` is the axis
+    (:attr:`PivotMotion.centre_xy_px`). "Up" is the line's normal turned a quarter turn
+    counter-clockwise from trail to lead (up in the picture when the lead is on the
+    right). NaN where a frame is not valid; the level is the distance itself (subtract
+    a rest value to get the motion).
+    """
+    lead, trail = np.asarray(lead_xy_px, dtype=float), np.asarray(trail_xy_px, dtype=float)
+    d = lead - trail
+    u = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    normal = np.stack([u[:, 1], -u[:, 0]], axis=1)
+    mid = 0.5 * (lead + trail)
+    h = np.sum(normal * (mid - np.asarray(centre_xy_px, dtype=float)), axis=1)
+    return np.where(np.asarray(valid, dtype=bool), h, np.nan)

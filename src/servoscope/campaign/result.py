@@ -21,6 +21,7 @@ from ..markers.track import Track
 from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.linearity import AmplitudeCheck
+from ..sysid.modes import ModeFit
 from ..sysid.model_text import model_equation
 from ..sysid.step import unit_step_function
 from .manifest import Campaign, TestSpec
@@ -120,6 +121,9 @@ class IdentificationResult:
     shared_t0_stderr_s : float
         The part of the dwells' t0 uncertainty they may share (see
         :func:`shared_t0_stderr`), added to the phase dead time's.
+    modes : list of ModeFit
+        The blade's structural modes seen in its heave after the step (see
+        :func:`servoscope.campaign.runner.blade_modes`); empty when none rings.
     amplitude_checks : list of AmplitudeCheck
         Each frequency measured at several input amplitudes, its gains compared
         (:func:`~servoscope.sysid.gain_against_amplitude`); empty otherwise.
@@ -136,6 +140,7 @@ class IdentificationResult:
     exposure: ExposureEstimate | None = None
     shared_t0_stderr_s: float = 0.0
     amplitude_checks: list[AmplitudeCheck] = field(default_factory=list)
+    modes: list[ModeFit] = field(default_factory=list)
 
     @property
     def transfer_function(self):
@@ -232,6 +237,7 @@ class IdentificationResult:
                 "exposure": None if self.exposure is None else self.exposure.summary(),
                 **({"gain_against_amplitude": [c.summary() for c in self.amplitude_checks]}
                    if self.amplitude_checks else {}),
+                **({"modes": [m.summary() for m in self.modes]} if self.modes else {}),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
                 "tests": tests,
@@ -358,8 +364,10 @@ class IdentificationResult:
         exposure = None if data.get("exposure") is None else ExposureEstimate.from_summary(data["exposure"])
         shared = (data.get("dead_time", {}).get("phase") or {}).get("shared_t0_stderr_s") or 0.0
         checks = [AmplitudeCheck.from_summary(c) for c in data.get("gain_against_amplitude", [])]
+        modes = [ModeFit(m["frequency_hz"], m["stderr"]["frequency_hz"], m["damping_ratio"],
+                         m["stderr"]["damping_ratio"], m["amplitude"], m["source"]) for m in data.get("modes", [])]
         return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
-                   list(data.get("warnings", [])), exposure, float(shared), checks)
+                   list(data.get("warnings", [])), exposure, float(shared), checks, modes)
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

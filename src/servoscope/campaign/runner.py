@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..angle.pivot import pivot_motion
+from ..angle.pivot import heave_px, pivot_motion
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
@@ -27,6 +27,7 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
+from ..sysid.modes import ModeFit, fit_damped_mode
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
 
@@ -136,6 +137,38 @@ def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | 
     return (f"LED found in {found} of {len(need)} videos but not in {len(missing)}: {', '.join(missing)}; these have "
             "no input start, so no phase and no dead time from them (each video's own warning says why; check the "
             "LED colour, or give their t0_s in the manifest)")
+
+
+def input_start_of(campaign: Campaign, label: str | None, tracks: dict[str, Track]) -> float | None:
+    """The input start of the test called ``label`` (None without one)."""
+    test = next((t for t in campaign.tests if t.label == label), None)
+    return None if test is None or label not in tracks else input_start(test, tracks[label])
+
+
+def blade_modes(step, track: Track | None, t0_s: float | None, model=None) -> list[ModeFit]:
+    """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
+
+    The heave is the markers' line's distance from the pitch axis
+    (:func:`servoscope.angle.heave_px`); the free motion starts when the servo has
+    settled (the step's measured settling time after t0, else its dead time and
+    0.3 s) and four of the model's time constants 1/(ζ·ωn) more: the servo's own
+    forced motion, 2 % at settling, biased the twin's 9 Hz mode by 0.03 %, 4 σ of its
+    fit. Its noise is the heave's frame-to-frame scatter before the input.
+    """
+    if step is None or track is None or t0_s is None:
+        return []
+    pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+    if pivot is None:
+        return []
+    heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+    before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
+    noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
+    settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
+    params = getattr(model, "params", {}) or {}
+    decay = params.get("natural_frequency_rad_s", 0.0) * params.get("damping_ratio", 0.0)
+    settled += 4.0 / decay if decay > 0 else 0.2
+    mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
+    return [] if mode is None else [mode]
 
 
 def pivot_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
@@ -462,6 +495,15 @@ def identify(
                     step_label = test.label
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
+    modes = blade_modes(step, tracks[step_label] if step_label else None, input_start_of(campaign, step_label, tracks),
+                        model)
+    for mode in modes:
+        near = [t.label for t in campaign.sine_tests if t.frequency_hz
+                and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
+        if near:
+            warnings.append(f"the blade's mode at {mode.frequency_hz:.3g} Hz (damping {mode.damping_ratio:.3f}) is "
+                            f"within its resonance of the dwell(s) {', '.join(near)}: the blade's own motion adds "
+                            "to the pitch there")
     if shared_t0_s > 0 and model.dead_time_s is not None:
         warnings.append(
             f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
@@ -472,4 +514,4 @@ def identify(
     if disagreement:
         warnings.append(disagreement)
     return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks)
+                                amplitude_checks, modes)

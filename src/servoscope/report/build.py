@@ -192,6 +192,13 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
+    if result.modes:
+        # The blade's own motion (the paper saw it ring on after its step), from its heave.
+        s.table(["blade mode (from the " + result.modes[0].source + "'s heave)", "frequency (Hz)", "damping ratio"],
+                [[f"mode {i + 1}",
+                  " ± ".join(format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)),
+                  " ± ".join(format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr))]
+                 for i, m in enumerate(result.modes)])
     if result.amplitude_checks:
         verdicts = "; ".join(f"{c.frequency_hz:.3g} Hz: {100 * c.change:+.2f} % from {c.amplitudes[0]:g} to "
                              f"{c.amplitudes[-1]:g} (p = {c.p_value:.2g}, {'linear' if c.linear else 'NOT linear'})"

@@ -189,6 +189,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     shake = _shake_px(preset, n, noise_seed)
     roll = preset.roll_rad * np.sin(2.0 * np.pi * preset.roll_hz * time_s)
     rock = preset.rock_rad * np.sin(2.0 * np.pi * preset.rock_hz * time_s)
+    heave = blade_heave_px(preset, signal, time_s)
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     if preset.frames_format is not None:
         writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
@@ -215,11 +216,11 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                                        phase)) if flicker else 1.0
                 if preset.monochrome:
                     clean = renderer.composite(float(pitch[i]), float(led[i]), gain, tuple(shake[i]), float(roll[i]),
-                                               float(rock[i]))
+                                               float(rock[i]), float(heave[i]))
                     writer.write_gray(_gray_frame(clean, preset, noise_seed, i), preset.bit_depth)
                 else:
                     writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]),
-                                                 float(roll[i]), float(rock[i])))
+                                                 float(roll[i]), float(rock[i]), float(heave[i])))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -239,9 +240,25 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **({"shake_xy_px": shake.tolist()} if preset.shake_px > 0 else {}),
         **({"roll_rad": roll.tolist()} if preset.roll_rad != 0 else {}),
         **({"rock_rad": rock.tolist()} if preset.rock_rad != 0 else {}),
+        **({"heave_px": heave.tolist()} if preset.blade_mode_hz > 0 else {}),
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
+
+
+def blade_heave_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
+    """The blade's heave (px, up positive) at each frame: its mode driven by the pitch's acceleration.
+
+    ``Q(s)/Θ(s) = −κ s² / (s² + 2ζω s + ω²)``, simulated with python-control on a grid 20× finer
+    than the frames (the mode's period is a handful of frames), from rest; zeros for a rigid blade.
+    """
+    if preset.blade_mode_hz <= 0 or time_s.size == 0:
+        return np.zeros(time_s.size)
+    w, z, k = 2.0 * math.pi * preset.blade_mode_hz, preset.blade_mode_damping, preset.blade_mode_px_per_rad
+    fine = np.linspace(0.0, float(time_s[-1]), 20 * time_s.size + 1)
+    pitch = preset.servo.response(signal, fine)
+    out = control.forced_response(control.tf([-k, 0.0, 0.0], [1.0, 2.0 * z * w, w * w]), fine, pitch - pitch[0])
+    return np.interp(time_s, fine, np.asarray(out.outputs, dtype=float))
 
 
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
@@ -446,10 +463,13 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                           "t0_frame_phase", "motion_blur", "timestamp_at", "manifest_exposure",
                                           "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
                                           "reference_stickers", "monochrome", "sine_amplitudes",
+                                          "blade_mode_hz", "blade_mode_damping", "blade_mode_px_per_rad",
                                           "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
+        **({"modes": [{"frequency_hz": p.blade_mode_hz, "damping_ratio": p.blade_mode_damping,
+                       "heave_px_per_rad": p.blade_mode_px_per_rad}]} if p.blade_mode_hz > 0 else {}),
         "input_units": p.input_units,
         "tests": tests,
     }

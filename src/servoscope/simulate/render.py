@@ -217,13 +217,16 @@ class FrameRenderer:
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
-    def outlines_px(self, pitch_rad: float, airframe: np.ndarray | None = None) -> list[np.ndarray]:
+    def outlines_px(self, pitch_rad: float, airframe: np.ndarray | None = None,
+                    heave_px: float = 0.0) -> list[np.ndarray]:
         """Recorded (distorted) outlines of blade, lead sticker, trail sticker, (LED housing,) LED.
 
         ``airframe`` (2×3, :func:`airframe_motion`) turns them with the airframe, in the
-        ideal image (before the lens), as the airframe turns in the world.
+        ideal image (before the lens), as the airframe turns in the world. ``heave_px``
+        moves the whole blade across its chord (the blade flapping, up positive).
         """
-        xy = _moved(self.scene.to_image(self._all_uv, float(pitch_rad)), None, airframe)
+        uv = self._all_uv if heave_px == 0.0 else self._all_uv + np.array([0.0, heave_px])
+        xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)
         return np.split(xy, self._splits)
@@ -262,7 +265,7 @@ class FrameRenderer:
 
     def composite(self, pitch_rad: float, led_level: float, lamp_gain: float = 1.0,
                   shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0,
-                  rock_rad: float = 0.0) -> np.ndarray:
+                  rock_rad: float = 0.0, heave_px: float = 0.0) -> np.ndarray:
         """The noise-free frame, float32 DN, shape (height, width, 3).
 
         The returned array is the renderer's working buffer: copy it before
@@ -286,6 +289,8 @@ class FrameRenderer:
         rock_rad : float
             The airframe rocking on its skids: the blade and the airframe's clutter
             turn, the rest stays (see :func:`airframe_motion`).
+        heave_px : float
+            The blade flapping: moved across its chord (px, up positive).
         """
         if not 0.0 <= led_level <= 1.0:
             raise ServoscopeError(f"led_level must be in [0, 1], not {led_level}")
@@ -305,7 +310,7 @@ class FrameRenderer:
             led_colour = self._led_off + led_level * (self._led_on - self._led_off)
             colours = self._colours + [led_colour]
         w, h = self.scene.width, self.scene.height
-        outlines = self.outlines_px(pitch_rad, airframe)
+        outlines = self.outlines_px(pitch_rad, airframe, heave_px)
         if motion is not None:
             outlines = [_moved(xy, motion) for xy in outlines]
         for xy, colour in zip(outlines, colours):
@@ -420,7 +425,7 @@ class FrameRenderer:
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,
                shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0,
-               rock_rad: float = 0.0) -> np.ndarray:
+               rock_rad: float = 0.0, heave_px: float = 0.0) -> np.ndarray:
         """One recorded frame: composite, add seeded noise, round to uint8.
 
         Parameters
@@ -431,16 +436,17 @@ class FrameRenderer:
             Fraction of the exposure during which the LED was lit, in [0, 1].
         frame_index : int
             Index of the frame (selects its noise).
-        lamp_gain, shift_px, roll_rad, rock_rad : float, (float, float), float, float
-            Lamps' flicker, camera shake and roll, the airframe's rocking, see :meth:`composite`.
+        lamp_gain, shift_px, roll_rad, rock_rad, heave_px : float, (float, float), float, float, float
+            Lamps' flicker, camera shake and roll, the airframe's rocking, the blade's flapping,
+            see :meth:`composite`.
 
         Returns
         -------
         ndarray of uint8, shape (height, width, 3)
             RGB frame.
         """
-        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px, roll_rad, rock_rad),
-                              frame_index)
+        return self._finished(self.composite(pitch_rad, led_level, lamp_gain, shift_px, roll_rad, rock_rad,
+                                             heave_px), frame_index)
 
     def render_blurred(self, pitch_rad: np.ndarray, led_lit: np.ndarray, frame_index: int = 0,
                        lamp_gain: np.ndarray | None = None, shift_px: tuple[float, float] = (0.0, 0.0),

@@ -1,0 +1,67 @@
+"""The blade's structural mode from its heave after the step (issue 18, builds 3-4, in part).
+
+The twin's blade flaps (a 9 Hz mode with 3 % damping driven by the pitch's acceleration,
+seen as heave across the chord); the mode is found from the step's ring-down. Oracles:
+the renderer's truth (the mode, each frame's heave) and a hand-made ring-down.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from servoscope.sysid.modes import fit_damped_mode
+
+
+def test_a_ringdown_is_found_within_its_interval():
+    rng = np.random.default_rng(2)
+    t = np.arange(300) * 0.005
+    wn, z = 2 * math.pi * 9.0, 0.03
+    y = 1.2 * np.exp(-z * wn * t) * np.cos(wn * math.sqrt(1 - z * z) * t + 0.4) + 0.01 * rng.standard_normal(t.size)
+    m = fit_damped_mode(t, y, 0.0)
+    assert abs(m.frequency_hz - 9.0) < 3 * m.frequency_stderr_hz and abs(m.damping_ratio - z) < 3 * m.damping_ratio_stderr
+    # The stated errors include the systematic part (a codec's, measured on the twin).
+    assert m.frequency_stderr_hz >= 0.004 * 9.0 * 0.999 and m.damping_ratio_stderr >= 0.08 * m.damping_ratio * 0.999
+    assert m.frequency_hz == pytest.approx(9.0, rel=1e-3) and m.damping_ratio == pytest.approx(z, rel=0.05)
+    # Noise alone rings nothing.
+    assert fit_damped_mode(t, 0.01 * rng.standard_normal(t.size), 0.0, noise=0.01) is None
+
+
+@pytest.mark.parametrize("codec", ["raw", "h264"])
+def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
+    from servoscope.angle import heave_px, pivot_motion
+    from servoscope.campaign.runner import identify
+    from servoscope.simulate import simulate_campaign
+
+    toml = simulate_campaign(tmp_path, "quick", 0, width=480, height=384, codec=codec, blade_mode_hz=9.0,
+                             blade_mode_damping=0.03, step_after_t0_s=1.5)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    assert truth["modes"][0]["frequency_hz"] == 9.0
+    res = identify(toml, workers=1)
+    (mode,) = res.modes
+    # The issue's targets: frequency within 1 %, damping within 15 %, from the step alone.
+    assert mode.frequency_hz == pytest.approx(9.0, rel=0.01) and mode.damping_ratio == pytest.approx(0.03, rel=0.15)
+    s = res.summary()
+    for key, value in (("frequency_hz", 9.0), ("damping_ratio", 0.03)):
+        lo, hi = s["modes"][0]["ci95"][key]
+        assert lo <= value <= hi, (key, lo, hi)
+    assert s["modes"][0]["source"] == "step"
+    # The heave the markers show is the renderer's, to a few hundredths of a pixel.
+    step = res.tracks["step"]
+    pivot = pivot_motion(step.lead_xy_px, step.trail_xy_px, step.valid)
+    h = heave_px(step.lead_xy_px, step.trail_xy_px, step.valid, pivot.centre_xy_px)
+    true_h = np.asarray(truth["tests"][-1]["heave_px"])
+    err = (h - np.median(h[:10])) - true_h
+    assert np.std(true_h) > 0.3 and np.sqrt(np.nanmean(err**2)) < 0.05
+    # The pitch identification is not disturbed by the flapping: the heave moves both stickers alike.
+    for name in ("gain", "natural_frequency_rad_s"):
+        assert s["model"][name] == pytest.approx(truth["model"][name], rel=0.01)
+    if codec == "h264":
+        return
+    # A rigid blade rings nothing.
+    rigid = identify(simulate_campaign(tmp_path / "rigid", "quick", 0, width=480, height=384, codec="raw",
+                                       step_after_t0_s=1.5), workers=1)
+    assert rigid.modes == [] and "modes" not in rigid.summary()
