@@ -291,21 +291,17 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
 
 def _say_frame_of_reference_and_shutter(name: str, result, exposure_s: float | None) -> None:
     """The track's lines beyond the counts: the reference line's turn (or a moving pitch axis), the shutter."""
-    import numpy as np  # deferred, as every command's heavy imports are
-
     if result.reference_angle_rad is None:
-        from .angle.pivot import pivot_motion
+        from .angle.pivot import axis_moved
 
-        pivot = pivot_motion(result.lead_xy_px, result.trail_xy_px, result.valid)
-        sigma = float(np.nanmedian(result.lead_sigma_px)) if np.isfinite(result.lead_sigma_px).any() else 0.0
-        if pivot is not None and pivot.moved(sigma):
+        pivot = axis_moved(result)
+        if pivot is not None:
             click.echo(f"warning: the blade's pitch axis moved by {pivot.rms_px:.2f} px RMS in the picture (camera "
                        "shake or roll, or the airframe rocking): a turn of the camera or the airframe is read as pitch; "
                        "film two stickers on the airframe and give them with --reference", err=True)
-    else:
-        motion = result.reference_angle_rad[np.isfinite(result.reference_angle_rad)]
-        click.echo(f"{name}: the reference line turned by {math.degrees(float(np.ptp(motion))):.3f}° peak to peak "
-                   f"({math.degrees(float(np.std(motion))):.3f}° RMS); taken off the angle")
+    elif (motion := result.reference_motion()) is not None:
+        click.echo(f"{name}: the reference line turned by {math.degrees(motion['peak_to_peak']):.3f}° peak to peak "
+                   f"({math.degrees(motion['rms']):.3f}° RMS); taken off the angle")
     if exposure_s is None:
         # The camera stage's reading of this video's shutter (a campaign pools every video's).
         from .camera.exposure import blur_evidence
@@ -432,8 +428,7 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     order = _parse_order(order_text)
     fix, bounds = _parse_held(fix_text, bound_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
-    check_held(order, "minimum_phase", {**manifest.model_fix, **fix},
-               {k: v for k, v in {**manifest.model_bounds, **bounds}.items() if k not in fix})
+    check_held(order, "minimum_phase", *manifest.held_parameters(fix, bounds))
     _check_out_dir(out_dir, manifest)
     failures: dict[str, str] = {}
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PIVOT_MOTION_WARN_PX", "PivotMotion", "heave_px", "pivot_motion"]
+__all__ = ["PIVOT_MOTION_WARN_PX", "PivotMotion", "axis_moved", "heave_px", "pivot_motion"]
 
 #: The axis moving more than this (RMS px, and 10 centroid σ) earns a warning where no reference
 #: stickers take the picture's own turn off the angle: six times what H.264 shows of a steady one.
@@ -86,6 +86,18 @@ def pivot_motion(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndar
                       s * (p[0] - m0[0]) + c * (p[1] - m0[1]) + mid[:, 1]], axis=1)
     spread = moved - moved.mean(axis=0)
     return PivotMotion((float(p[0]), float(p[1])), float(np.sqrt(np.mean(np.sum(spread**2, axis=1)))), swing)
+
+
+def axis_moved(track) -> PivotMotion | None:
+    """The blade's axis in a track's picture when it moved beyond what a steady camera shows; else None.
+
+    ``track`` is a :class:`~servoscope.markers.Track` (its centroids, validity and centroid
+    uncertainty): the threshold is :meth:`PivotMotion.moved` at the track's median centroid σ.
+    """
+    pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+    sigma = np.asarray(track.lead_sigma_px, dtype=float)
+    centroid_sigma = float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else 0.0
+    return pivot if pivot is not None and pivot.moved(centroid_sigma) else None
 
 
 def heave_px(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndarray, centre_xy_px) -> np.ndarray:

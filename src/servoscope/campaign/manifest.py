@@ -117,6 +117,17 @@ class Campaign:
     model_fix: dict[str, float] = field(default_factory=dict)
     model_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
 
+    def held_parameters(self, fix: dict[str, float] | None = None,
+                        bounds: dict[str, tuple[float, float]] | None = None
+                        ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+        """The model parameters held: the manifest's ``[model]``, with ``fix``/``bounds`` added and winning.
+
+        A parameter fixed by the caller is no longer bounded by the manifest.
+        """
+        fixed = {**self.model_fix, **(fix or {})}
+        bounded = {k: v for k, v in {**self.model_bounds, **(bounds or {})}.items() if k not in (fix or {})}
+        return fixed, bounded
+
     @property
     def sine_tests(self) -> list[TestSpec]:
         return [t for t in self.tests if t.kind == "sine"]

@@ -214,9 +214,7 @@ class IdentificationResult:
             entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
             if track.reference_angle_rad is not None:
                 # How much the airframe's reference line turned in this video (taken off the angle).
-                motion = track.reference_angle_rad[np.isfinite(track.reference_angle_rad)]
-                entry["reference_motion_rad"] = (None if motion.size == 0 else
-                                                 {"rms": float(np.std(motion)), "peak_to_peak": float(np.ptp(motion))})
+                entry["reference_motion_rad"] = track.reference_motion()
             fit = self.sine_fits.get(test.label)
             if fit is not None:
                 entry["sine_fit"] = jsonable(fit.summary())

@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..angle.pivot import heave_px, pivot_motion
+from ..angle.pivot import axis_moved, heave_px, pivot_motion
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
@@ -139,13 +139,7 @@ def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | 
             "LED colour, or give their t0_s in the manifest)")
 
 
-def input_start_of(campaign: Campaign, label: str | None, tracks: dict[str, Track]) -> float | None:
-    """The input start of the test called ``label`` (None without one)."""
-    test = next((t for t in campaign.tests if t.label == label), None)
-    return None if test is None or label not in tracks else input_start(test, tracks[label])
-
-
-def blade_modes(step, track: Track | None, t0_s: float | None, model=None) -> list[ModeFit]:
+def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
     """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
 
     The heave is the markers' line's distance from the pitch axis
@@ -155,8 +149,9 @@ def blade_modes(step, track: Track | None, t0_s: float | None, model=None) -> li
     forced motion, 2 % at settling, biased the twin's 9 Hz mode by 0.03 %, 4 σ of its
     fit. Its noise is the heave's frame-to-frame scatter before the input.
     """
-    if step is None or track is None or t0_s is None:
+    if step is None or track is None:
         return []
+    t0_s = step.t0_s
     pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
     if pivot is None:
         return []
@@ -164,8 +159,7 @@ def blade_modes(step, track: Track | None, t0_s: float | None, model=None) -> li
     before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
     noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
     settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
-    params = getattr(model, "params", {}) or {}
-    decay = params.get("natural_frequency_rad_s", 0.0) * params.get("damping_ratio", 0.0)
+    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
     settled += 4.0 / decay if decay > 0 else 0.2
     mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
     return [] if mode is None else [mode]
@@ -184,9 +178,8 @@ def pivot_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
         track = tracks.get(test.label)
         if track is None:
             continue
-        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
-        sigma = np.nanmedian(track.lead_sigma_px) if np.isfinite(track.lead_sigma_px).any() else 0.0
-        if pivot is not None and pivot.moved(float(sigma)):
+        pivot = axis_moved(track)
+        if pivot is not None:
             moved.append(f"{test.label} {pivot.rms_px:.2f} px")
     if not moved:
         return None
@@ -453,8 +446,7 @@ def identify(
                                               [systematic[label] for label in fr.labels])
     warnings.extend(w for w in (c.warning() for c in amplitude_checks) if w)
     mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
-    held_fix = {**campaign.model_fix, **(fix or {})}
-    held_bounds = {k: v for k, v in {**campaign.model_bounds, **(bounds or {})}.items() if k not in (fix or {})}
+    held_fix, held_bounds = campaign.held_parameters(fix, bounds)
     model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=held_fix or None,
                                   bounds=held_bounds or None)
     warnings.extend(fr.warnings)
@@ -495,8 +487,7 @@ def identify(
                     step_label = test.label
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
-    modes = blade_modes(step, tracks[step_label] if step_label else None, input_start_of(campaign, step_label, tracks),
-                        model)
+    modes = blade_modes(step, tracks[step_label] if step_label else None, model)
     for mode in modes:
         near = [t.label for t in campaign.sine_tests if t.frequency_hz
                 and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]

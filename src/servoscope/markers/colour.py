@@ -185,11 +185,6 @@ class BrightnessModel:
         level = (extreme,) * 3
         return cls(level, spec == BRIGHT, 0.5 * (typical + extreme))
 
-    @property
-    def spec(self) -> str:
-        """"bright" or "dark"."""
-        return BRIGHT if self.bright else DARK
-
     def learned(self, pixels_rgb: np.ndarray) -> "BrightnessModel":
         """The marker's level from its core pixels; the threshold stays (flicker scales both sides)."""
         level = float(np.median(luma_bt601(np.asarray(pixels_rgb).reshape(-1, 3))))

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from ..camera.model import CameraModel
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
+from .colour import BRIGHTNESS
 
 __all__ = ["BACKENDS", "ENGINES", "TrackerSettings", "resolve_engine"]
 
@@ -132,7 +133,7 @@ def resolve_engine(settings: TrackerSettings) -> str:
         raise ServoscopeError(f"backend: {settings.backend!r}: {RETIRED_BACKENDS[settings.backend]}")
     if settings.backend not in BACKENDS:
         raise ServoscopeError(f"backend: {settings.backend!r} is not one of {', '.join(BACKENDS)}")
-    brightness = any(str(m).strip().lower() in ("bright", "dark") for m in (settings.lead, settings.trail))
+    brightness = any(str(m).strip().lower() in BRIGHTNESS for m in (settings.lead, settings.trail))
     if brightness and settings.engine in ("numba", "numpy"):
         raise ServoscopeError(f"engine {settings.engine!r} tells markers by colour; markers told by brightness "
                               "(\"bright\", \"dark\") are tracked by engine=\"reference-rgb\" (or \"auto\")")

@@ -173,6 +173,13 @@ class Track:
             "warnings": list(self.warnings),
         }
 
+    def reference_motion(self) -> dict[str, float] | None:
+        """How much the reference line turned (rad): ``{"rms", "peak_to_peak"}``; None without one measured."""
+        if self.reference_angle_rad is None:
+            return None
+        motion = self.reference_angle_rad[np.isfinite(self.reference_angle_rad)]
+        return None if motion.size == 0 else {"rms": float(np.std(motion)), "peak_to_peak": float(np.ptp(motion))}
+
     def columns(self) -> dict[str, np.ndarray]:
         """The per-frame table as a dict of columns (pandas-free)."""
         return {

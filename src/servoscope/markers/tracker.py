@@ -144,10 +144,7 @@ def _check_monochrome(path: Path, info: VideoInfo, specs) -> None:
 
 def _as_reference(text: str) -> str:
     """A message about the reference pass's markers, named as the user named them."""
-    return (text.replace("the lead marker", "the first reference marker")
-            .replace("the trail marker", "the second reference marker")
-            .replace("lead marker", "first reference marker").replace("trail marker", "second reference marker")
-            .replace("LED", "LED (not used for the reference)"))
+    return text.replace("lead marker", "first reference marker").replace("trail marker", "second reference marker")
 
 
 def _against_reference(path: Path, settings: TrackerSettings, track: Track) -> Track:

@@ -226,13 +226,10 @@ def _window(tracker: MarkerTracker, shape, centre=None) -> tuple[int, int, int, 
     return x0, y0, x1, y1
 
 
-def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape, prm: np.ndarray | None = None) -> Blob | None:
-    """The marker's blob from its kernel output row, or None when the window's class is implausible.
-
-    ``prm`` is the kernel row the frame was measured with (its support); default the learned one.
-    """
+def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob | None:
+    """The marker's blob from its kernel output row, or None when the window's class is implausible."""
     st = tracker.yuv
-    prm = st.prm if prm is None else prm
+    prm = st.prm
     row = row.tolist()  # Python floats: indexing and arithmetic on NumPy scalars cost more
     n = row[K.Q.N]
     if not n > 0 or not row[K.Q.M00] > 0:
@@ -369,7 +366,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
         led_prm[0] = 1.0 if led_local is not None else 0.0
         kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, params, led_prm, out, led_out)
         for k, tracker in enumerate(trackers):
-            blob = _kernel_blob(tracker, out[k], windows[k], shape, params[k]) if windows[k] is not None else None
+            blob = _kernel_blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
             if blob is None:
                 # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
                 # then measure it with the kernel around what was found.

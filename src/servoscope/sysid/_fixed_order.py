@@ -55,11 +55,17 @@ def check_held(order: Any, zeros: str, fix: dict[str, float], bounds: dict[str, 
         raise ServoscopeError("fixed or bounded parameters need a given order (their names depend on it), "
                               "not order='auto'")
     nb, na = check_order(order)
+    _held(Structure(nb, na, zeros, True, 1.0), fix, bounds, f"model of order ({nb}, {na})")
+
+
+def _held(st: Structure, fix: dict[str, float] | None, bounds: dict[str, tuple[float, float]] | None,
+          who: str) -> Structure:
+    """``st`` with ``fix`` and ``bounds`` held (:meth:`Structure.with_held`); a ServoscopeError naming `who` else."""
     try:
-        Structure(nb, na, zeros, True, 1.0).with_held(
-            {k: float(v) for k, v in fix.items()}, {k: (float(v[0]), float(v[1])) for k, v in bounds.items()})
+        return st.with_held({k: float(v) for k, v in (fix or {}).items()},
+                            {k: (float(v[0]), float(v[1])) for k, v in (bounds or {}).items()})
     except (ValueError, TypeError, IndexError) as exc:
-        raise ServoscopeError(f"model of order ({nb}, {na}): {exc}") from None
+        raise ServoscopeError(f"{who}: {exc}") from None
 
 
 def check_order(order: Any) -> tuple[int, int]:
@@ -113,11 +119,7 @@ def _fit_fixed_order(
     w_ref = float(math.exp(np.mean(np.log(d.w)))) if d.n else 1.0
     st = Structure(nb, na, zeros, mode == "complex", w_ref)
     if fix or bounds:
-        try:
-            st = st.with_held({k: float(v) for k, v in (fix or {}).items()},
-                              {k: (float(v[0]), float(v[1])) for k, v in (bounds or {}).items()})
-        except (ValueError, TypeError, IndexError) as exc:
-            raise ServoscopeError(f"{who}: {exc}") from None
+        st = _held(st, fix, bounds, who)
     problem = identifiability_problem(d, st, mode)
     if problem is not None:
         raise ServoscopeError(f"{who}: {problem}")
