@@ -22,6 +22,8 @@ from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.linearity import AmplitudeCheck
 from ..sysid.modes import ModeFit
+from ..sysid.servo_fit import ServoModelSelection
+from ..sysid.servo_sim import NONLINEAR_PARAMETER
 from ..sysid.model_text import model_equation
 from ..sysid.step import unit_step_function
 from .manifest import Campaign, TestSpec
@@ -52,8 +54,12 @@ def _fit_part(model: dict) -> dict:
     stderr and interval) by the chosen estimate's and keeps the fit's under
     ``dead_time_from_phase_s``: undone here.
     """
-    fit = {k: v for k, v in model.items()
-           if k not in ("dead_time_from_phase_s", "dead_time_from_phase_stderr_s", "dead_time_source")}
+    own = {"dead_time_from_phase_s", "dead_time_from_phase_stderr_s", "dead_time_source", "structure", "fixed",
+           "candidates", "time_domain", *NONLINEAR_PARAMETER.values()}
+    fit = {k: v for k, v in model.items() if k not in own}
+    for part in ("stderr", "ci95"):
+        if isinstance(fit.get(part), dict):
+            fit[part] = {k: v for k, v in fit[part].items() if k not in own}
     fit["dead_time_s"] = model.get("dead_time_from_phase_s")
     fit["dead_time_stderr_s"] = (model.get("stderr") or {}).get("dead_time_s")
     return fit
@@ -141,6 +147,8 @@ class IdentificationResult:
     shared_t0_stderr_s: float = 0.0
     amplitude_checks: list[AmplitudeCheck] = field(default_factory=list)
     modes: list[ModeFit] = field(default_factory=list)
+    servo_model: ServoModelSelection | None = None
+    predicted_step_fit_percent: float | None = None
 
     @property
     def transfer_function(self):
@@ -195,6 +203,7 @@ class IdentificationResult:
         chosen = estimates["step"] if self.dead_time_source == "step test" else estimates["phase"]
         if chosen is not None and isinstance(model.get("ci95"), dict):
             model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen["ci95_s"])}
+        model.update(self._structure_summary(model))
         tests = []
         for test in self.campaign.tests:
             track = self.tracks[test.label]
@@ -237,12 +246,52 @@ class IdentificationResult:
                    if self.amplitude_checks else {}),
                 **({"modes": [m.summary() for m in self.modes]} if self.modes else {}),
                 "frequency_response": self.frequency_response.summary(),
-                "step": None if self.step is None else {"label": self.step_label, **self.step.summary()},
+                "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
+                                                        **self._step_fits()},
                 "tests": tests,
                 "skipped": [{"label": label, "reason": reason} for label, reason in self.campaign.skipped],
                 "warnings": list(self.warnings),
             }
         )
+
+    def _structure_summary(self, model: dict) -> dict:
+        """result.json's ``model`` additions: the structure, its parameter beside the linear ones, the candidates.
+
+        With a time-domain fit (``identify --nonlinear``) the selected structure's own
+        parameter sits in ``model``, ``model.stderr`` and ``model.ci95``; ``model.time_domain``
+        holds every candidate's whole fit (its linear part too) and the cross-validation.
+        """
+        held = [k for k, v in (model.get("held") or {}).items() if isinstance(v, dict) and "fixed" in v]
+        if self.servo_model is None:
+            return {"structure": "linear", "fixed": held}
+        sel = self.servo_model.selected
+        out: dict[str, Any] = {"structure": sel.structure,
+                               "fixed": sorted(set(held) | set(sel.fixed)),
+                               "candidates": [{"structure": c.structure, "aic": c.aic, "bic": c.bic, "J": c.J,
+                                               "step_fit_percent": c.step_fit_percent} for c in self.servo_model.candidates],
+                               "time_domain": self.servo_model.summary()}
+        name = sel.nonlinear_parameter
+        if name is not None:
+            out[name] = sel.params[name]
+            out["stderr"] = {**(model.get("stderr") or {}), name: sel.stderr[name]}
+            out["ci95"] = {**(model.get("ci95") or {}), name: list(sel.ci95[name])}
+        return out
+
+    def _step_fits(self) -> dict:
+        """The step's fit (percent) by the selected time-domain model, and as predicted from the dwells alone."""
+        if self.servo_model is not None:
+            cv = self.servo_model.cross_validation.get("dwells_to_step") or {}
+            return {"fit_percent": self.servo_model.selected.step_fit_percent,
+                    "predicted_fit_percent": cv.get("fit_percent")}
+        fit = None
+        residual = None if self.step is None else self.step.residual
+        if residual is not None:
+            # The step analysis's own fit of the model's shape (its dead time and level fitted to the step).
+            y = self.step.y[self.step.time_s >= self.step.t0_s]
+            ok = np.isfinite(y) & np.isfinite(residual)
+            spread = float(np.linalg.norm(y[ok] - y[ok].mean())) if ok.any() else 0.0
+            fit = 100.0 * (1.0 - float(np.linalg.norm(residual[ok])) / spread) if spread > 0 else None
+        return {"fit_percent": fit, "predicted_fit_percent": self.predicted_step_fit_percent}
 
     def write_tables(self, out_dir: str | Path) -> dict[str, Path]:
         """Write tracks/<label>.csv and frequency_response.csv, each whole or not at all.
@@ -364,8 +413,12 @@ class IdentificationResult:
         checks = [AmplitudeCheck.from_summary(c) for c in data.get("gain_against_amplitude", [])]
         modes = [ModeFit(m["frequency_hz"], m["stderr"]["frequency_hz"], m["damping_ratio"],
                          m["stderr"]["damping_ratio"], m["amplitude"], m["source"]) for m in data.get("modes", [])]
+        td = data["model"].get("time_domain")
+        selection = None if td is None else ServoModelSelection.from_summary(td)
+        predicted = None if data.get("step") is None else data["step"].get("predicted_fit_percent")
         return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
-                   list(data.get("warnings", [])), exposure, float(shared), checks, modes)
+                   list(data.get("warnings", [])), exposure, float(shared), checks, modes, selection,
+                   predicted if selection is None else None)
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

@@ -28,6 +28,7 @@ from ..sysid import (
     rigid_motion_null,
 )
 from ..sysid.modes import ModeFit, fit_damped_mode
+from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
 
@@ -327,6 +328,7 @@ def identify(
     progress: ProgressFn | None = None,
     fix: dict[str, float] | None = None,
     bounds: dict[str, tuple[float, float]] | None = None,
+    nonlinear: str = "none",
     **track_options,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -351,6 +353,13 @@ def identify(
     keep_going : bool
         Leave out a video that cannot be tracked (with a warning) and identify
         from the rest.
+    fix, bounds : dict, optional
+        Parameters held at a value or within limits (with the manifest's ``[model]``).
+    nonlinear : {"none", "auto", "linear", "rate_limit", "backlash", "quantization", "saturation"}
+        Also fit models to the whole traces of the dwells and the step
+        (:mod:`servoscope.campaign.joint`): "linear" the linear model alone, a structure's name
+        that structure beside it, "auto" every structure, selected by BIC. "none": the
+        frequency-domain fit alone.
     **track_options
         Passed to :func:`track_campaign` when ``tracks`` is not given
         (``workers``, ``scheduler``, ``cache_dir``, ``force``, ``on_done``).
@@ -370,6 +379,8 @@ def identify(
     """
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
+    held_fix, held_bounds = campaign.held_parameters(fix, bounds)
+    check_nonlinear(campaign, nonlinear, order, held_fix, held_bounds)
     if tracks is None:
         failures: dict[str, str] = {}
         tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress, **track_options)
@@ -446,9 +457,9 @@ def identify(
                                               [systematic[label] for label in fr.labels])
     warnings.extend(w for w in (c.warning() for c in amplitude_checks) if w)
     mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
-    held_fix, held_bounds = campaign.held_parameters(fix, bounds)
-    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=held_fix or None,
-                                  bounds=held_bounds or None)
+    fr_fix, fr_bounds, _, _ = split_held(held_fix, held_bounds)
+    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=fr_fix or None,
+                                  bounds=fr_bounds or None)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
 
@@ -504,5 +515,20 @@ def identify(
     disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
     if disagreement:
         warnings.append(disagreement)
+    exposure_s = campaign.exposure_s if campaign.exposure_s is not None else (
+        exposure.value_s if exposure.known else 0.0)
+    fitted = {"gain": model.gain, **model.params, "dead_time_s": model.dead_time_s}
+    selection = None
+    if nonlinear != "none":
+        t0_se = math.hypot(shared_t0_s, float(np.median(list(own_t0_stderr.values()) or [0.0])))
+        selection = servo_model(
+            campaign, tracks, {label: f.window_s for label, f in fits.items()},
+            {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
+            fitted if tuple(order) == (0, 2) and all(np.isfinite(list(fitted.values()))) else None,
+            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds)
+        warnings.extend(w for w in selection.selected.warnings if w not in warnings)
+    predicted = None
+    if step_label is not None and order == (0, 2):
+        predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)
     return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks, modes)
+                                amplitude_checks, modes, selection, predicted)

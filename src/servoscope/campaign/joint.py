@@ -1,0 +1,159 @@
+"""The campaign's tests as whole traces, for one model of the sines and the step (issue 17).
+
+:func:`servo_model` turns each tracked test into a :class:`~servoscope.sysid.servo_sim.ServoTrace`
+(its valid angles, input start, measured noise and the camera's exposure) and runs
+:func:`~servoscope.sysid.servo_fit.select_servo_model`: the linear model and the nonlinear
+structures asked for, fitted to the dwells and the step together, selected by BIC and
+cross-validated. :func:`check_nonlinear` refuses, before any tracking, what cannot work.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ServoscopeError
+from ..markers.tracker import Track
+from ..sysid.servo_fit import ServoModelSelection, check_servo_held, fit_percent, select_servo_model
+from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
+from .manifest import Campaign
+from .result import input_start
+
+__all__ = ["NONLINEAR_CHOICES", "check_nonlinear", "predicted_step_fit_percent", "servo_model", "servo_traces",
+           "split_held"]
+
+#: What ``identify --nonlinear`` takes: none (the frequency-domain fit alone), auto (every
+#: structure, selected by BIC), or one structure (fitted beside the linear model).
+NONLINEAR_CHOICES = ("none", "auto", *STRUCTURES)
+
+
+def split_held(fix: dict[str, float], bounds: dict[str, tuple[float, float]]) -> tuple[dict, dict, dict, dict]:
+    """The held parameters the frequency-domain fit knows, and the nonlinear structures' own."""
+    own = set(NONLINEAR_PARAMETER.values())
+    return ({k: v for k, v in fix.items() if k not in own}, {k: v for k, v in bounds.items() if k not in own},
+            {k: v for k, v in fix.items() if k in own}, {k: v for k, v in bounds.items() if k in own})
+
+
+def structures_of(nonlinear: str) -> tuple[str, ...]:
+    """The structures ``--nonlinear`` asks for (the linear model is always fitted beside them)."""
+    if nonlinear == "auto":
+        return tuple(s for s in STRUCTURES if s != "linear")
+    return (nonlinear,)
+
+
+def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, float],
+                    bounds: dict[str, tuple[float, float]]) -> None:
+    """Refuse, before any tracking, a time-domain fit the campaign cannot support.
+
+    Raises
+    ------
+    ServoscopeError
+        An unknown structure; a nonlinear parameter held without its structure; a nonlinear
+        structure without a step test or with fewer dwells than parameters; a model order
+        other than the 2nd-order one the time-domain models are built on.
+    """
+    if nonlinear not in NONLINEAR_CHOICES:
+        raise ServoscopeError(f"--nonlinear {nonlinear!r}: choose from {', '.join(NONLINEAR_CHOICES)}")
+    own = [k for k in [*fix, *bounds] if k in NONLINEAR_PARAMETER.values()]
+    if nonlinear == "none":
+        if own:
+            raise ServoscopeError(f"{own[0]} belongs to a nonlinear model: add --nonlinear "
+                                  f"{next(s for s, p in NONLINEAR_PARAMETER.items() if p == own[0])} (or auto)")
+        return
+    tried = structures_of(nonlinear)
+    for name in own:
+        if not any(NONLINEAR_PARAMETER.get(s) == name for s in tried):
+            raise ServoscopeError(f"{name} belongs to a structure --nonlinear {nonlinear} does not fit")
+    for s in tried:
+        check_servo_held(s, {k: v for k, v in fix.items() if k in LINEAR_PARAMETERS or k == NONLINEAR_PARAMETER.get(s)},
+                         {k: v for k, v in bounds.items() if k in LINEAR_PARAMETERS or k == NONLINEAR_PARAMETER.get(s)})
+    if tuple(order) != (0, 2):
+        raise ServoscopeError(f"--nonlinear {nonlinear}: the time-domain models are 2nd-order with a dead time; "
+                              f"use --order 2 (not {order})")
+    if nonlinear == "linear":
+        return
+    if not campaign.step_tests:
+        raise ServoscopeError(f"{campaign.path}: --nonlinear {nonlinear} needs a step test beside the dwells (a "
+                              "nonlinearity shows in how a large, sudden input differs from the sines); add one, or "
+                              "use --nonlinear linear")
+    n_params = len(LINEAR_PARAMETERS) + 1
+    if len(campaign.sine_tests) < n_params:
+        raise ServoscopeError(f"{campaign.path}: --nonlinear {nonlinear} fits {n_params} parameters but the campaign "
+                              f"has {len(campaign.sine_tests)} sine dwell(s); plan at least {n_params}")
+
+
+def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str, tuple[float, float]],
+                 exposure_s: float) -> list[ServoTrace]:
+    """Each test with a known input start and enough valid frames, as a trace.
+
+    ``windows`` holds each fitted dwell's steady-state window (its fundamental's, for CIFER's J);
+    a sine whose dwell fit was left out is left out here too.
+    """
+    traces = []
+    for test in campaign.tests:
+        track = tracks.get(test.label)
+        if track is None or (test.kind == "sine" and test.label not in windows):
+            continue
+        t0 = input_start(test, track)
+        if t0 is None or track.n_valid < 10:
+            continue
+        noise = track.summary().get("angle_noise_measured_rad") or track.summary().get("angle_noise_rad")
+        v = track.valid
+        traces.append(ServoTrace(test.label, test.kind, test.amplitude, test.frequency_hz, float(t0),
+                                 np.asarray(track.angle_time_s[v], float), np.asarray(track.angle_rad[v], float),
+                                 float(noise) if noise and noise > 0 else 1e-4, exposure_s,
+                                 windows.get(test.label)))
+    return traces
+
+
+def servo_model(campaign: Campaign, tracks: dict[str, Track], windows: dict[str, tuple[float, float]],
+                response: dict[str, tuple[float, float, float]], start: dict[str, float] | None, *,
+                nonlinear: str, exposure_s: float, t0_stderr_s: float, fix: dict[str, float],
+                bounds: dict[str, tuple[float, float]]) -> ServoModelSelection:
+    """Fit and select the time-domain models ``nonlinear`` asks for (see :func:`check_nonlinear`).
+
+    Parameters
+    ----------
+    campaign, tracks
+    windows : dict of label → (start, end)
+        The fitted dwells' steady-state windows.
+    response : dict of label → (gain, phase_deg, coherence)
+        The measured frequency response, for CIFER's J of each candidate.
+    start : dict or None
+        The frequency-domain fit's parameters, a starting point (None when it has none).
+    nonlinear : str
+        One of :data:`NONLINEAR_CHOICES` but "none".
+    exposure_s : float
+        The exposure averaging each sample (0 when unknown).
+    t0_stderr_s : float
+        The input starts' error, added to the dead time's.
+    fix, bounds : dict
+        Held parameters, linear and nonlinear.
+    """
+    traces = servo_traces(campaign, tracks, windows, exposure_s)
+    if not any(tr.kind == "sine" for tr in traces) and not any(tr.kind == "step" for tr in traces):
+        raise ServoscopeError(f"{campaign.path}: no test has a known input start and enough valid frames for a "
+                              "time-domain fit")
+    return select_servo_model(traces, structures_of(nonlinear), start=start, fix=fix, bounds=bounds,
+                              response=response, t0_stderr_s=t0_stderr_s)
+
+
+def predicted_step_fit_percent(campaign: Campaign, tracks: dict[str, Track], label: str,
+                               params: dict[str, float], exposure_s: float) -> float | None:
+    """The step's fit (percent) predicted by a 2nd-order model fitted to the dwells alone.
+
+    The step's rest angle is its own (the mean before the delayed input arrives); nothing
+    else is fitted to the step.
+    """
+    if any(not (k in params and params[k] is not None and math.isfinite(params[k])) for k in LINEAR_PARAMETERS):
+        return None
+    traces = servo_traces(campaign, {label: tracks[label]}, {}, exposure_s)
+    if not traces:
+        return None
+    trace = traces[0]
+    predicted = simulate_trace(trace, "linear", params)
+    before = trace.time_s < trace.t0_s + params["dead_time_s"]
+    rest = float(np.mean((trace.angle_rad - predicted)[before])) if before.sum() >= 3 else float(
+        np.mean(trace.angle_rad - predicted))
+    return fit_percent(trace.angle_rad, predicted + rest)

@@ -1,0 +1,682 @@
+"""One model for the sines and the step: block-structured servo models fitted to whole traces.
+
+The frequency-domain fit (:mod:`servoscope.sysid.tf_fit`) sees each dwell's fundamental
+only. Here a model of :mod:`servoscope.sysid.servo_sim` (the linear dynamics and dead time,
+with at most one of a rate limit, backlash, command quantization or saturation) is
+simulated for every test and fitted to the measured angle, sample by sample: the dwells'
+harmonics and transients count, and so does the step.
+
+Method
+------
+* Residuals are ``(measured − model − offset)/σ``, each test's rest angle (``offset``)
+  projected out. The dwells and the step are two data sets, each weighted by its own noise:
+  first the tracker's measured noise, then (after a first fit) the larger of that and the
+  set's own residual scatter under the best-fitting candidate, so that neither set swamps
+  the other by its number of samples (a maximum-likelihood fit with one variance per set).
+* The continuous parameters are fitted by :func:`scipy.optimize.least_squares` (positive
+  ones on a log scale, from several starts for a nonlinear parameter). Their covariance is
+  the Newey–West sandwich of :func:`servoscope.sysid.hac.hac_covariance` (tracking errors
+  are correlated from frame to frame); the dead time's adds the input starts' error.
+* The quantization step moves the model in jumps (the command's staircase changes only
+  when a level crosses a sample), so it is profiled on a grid; its interval is the set of
+  steps whose cost is within χ²(1)'s 95 % point of the best, in the fit's own noise units.
+* Model selection: AIC and BIC with the cost in units of the best candidate's residual
+  variance, widened by its lag-1 autocorrelation ``(1 + ρ)/(1 − ρ)``, and the number of
+  effective samples reduced by the same factor. A nonlinear structure is selected only when
+  its BIC beats the linear model's by more than :data:`BIC_MARGIN` ("very strong" on Kass &
+  Raftery's scale): a tracking artefact must not read as a nonlinearity.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings as _warnings
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from ..errors import ServoscopeError
+from ..results import import_pandas, jsonable
+from ._tf_metrics import cifer_cost
+from .hac import hac_covariance
+from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
+
+__all__ = ["BIC_MARGIN", "STEP_FIT_PREDICTS", "ServoModelFit", "ServoModelSelection", "check_servo_held", "cross_validate",
+           "dwell_cost", "fit_percent", "fit_servo_model", "select_servo_model"]
+
+#: BIC a nonlinear structure must gain over the linear model to be selected.
+BIC_MARGIN = 10.0
+_Z95 = 1.959963984540054
+_CHI2_1_95 = 3.841458820694124
+#: Positive parameters, fitted on a log scale.
+_POSITIVE = {"natural_frequency_rad_s", "damping_ratio", *NONLINEAR_PARAMETER.values()}
+_DEFAULT_BOUNDS = {"gain": (-math.inf, math.inf), "natural_frequency_rad_s": (1e-3, 1e5),
+                   "damping_ratio": (1e-3, 20.0), "dead_time_s": (0.0, 2.0)}
+
+
+def fit_percent(measured: NDArray[np.float64], predicted: NDArray[np.float64]) -> float:
+    """MATLAB ``compare``'s fit: ``100·(1 − ‖y − ŷ‖/‖y − mean(y)‖)``, in percent (100: perfect)."""
+    y = np.asarray(measured, dtype=float)
+    spread = float(np.linalg.norm(y - y.mean()))
+    if spread == 0.0:
+        return float("nan")
+    return 100.0 * (1.0 - float(np.linalg.norm(y - np.asarray(predicted, dtype=float))) / spread)
+
+
+def check_servo_held(structure: str, fix: dict[str, float] | None,
+                     bounds: dict[str, tuple[float, float]] | None) -> None:
+    """Raise ServoscopeError for a held parameter the structure does not have, or bounds that exclude a fix."""
+    names = set(LINEAR_PARAMETERS)
+    if structure in NONLINEAR_PARAMETER:
+        names.add(NONLINEAR_PARAMETER[structure])
+    for name in [*(fix or {}), *(bounds or {})]:
+        if name not in names:
+            import difflib
+
+            close = difflib.get_close_matches(name, sorted(names), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ServoscopeError(f"the {structure} model has no parameter {name!r}{hint}; "
+                                  f"its parameters: {', '.join(sorted(names))}")
+    for name, (lo, hi) in (bounds or {}).items():
+        if not lo < hi:
+            raise ServoscopeError(f"bound on {name}: the lower limit {lo} must be below the upper {hi}")
+        if name in (fix or {}) and not lo <= fix[name] <= hi:
+            raise ServoscopeError(f"{name} is fixed at {fix[name]}, outside its bounds [{lo}, {hi}]")
+
+
+@dataclass
+class ServoModelFit:
+    """A block-structured model fitted to whole traces (see the module's description).
+
+    Attributes
+    ----------
+    structure : str
+        One of ``"linear"``, ``"rate_limit"``, ``"backlash"``, ``"quantization"``, ``"saturation"``.
+    params, stderr : dict
+        Every parameter (linear part and the structure's own) and its standard error (0 when held fixed).
+    ci95 : dict of name → (lo, hi)
+    fixed : tuple of str
+        The parameters held fixed.
+    chi2 : float
+        The cost, in units of each data set's noise.
+    n_samples, n_free : int
+        Samples fitted; free parameters (the tests' rest angles included).
+    offsets : dict of label → float
+        Each test's rest angle, rad.
+    sigma : dict of data set → float
+        The noise each data set was weighted by, rad.
+    aic, bic : float
+        Set by :func:`select_servo_model` (NaN for a lone fit).
+    J : float
+        CIFER's cost of the model's fundamentals against the dwells' measured response (NaN without one).
+    step_fit_percent, dwell_fit_percent : float or None
+        :func:`fit_percent` of the model on the step, and on the dwells together.
+    traces : list of ServoTrace
+        What was fitted (for plots and predictions).
+    warnings : list of str
+    """
+
+    structure: str
+    params: dict[str, float]
+    stderr: dict[str, float]
+    ci95: dict[str, tuple[float, float]]
+    fixed: tuple[str, ...]
+    chi2: float
+    n_samples: int
+    n_free: int
+    offsets: dict[str, float]
+    sigma: dict[str, float]
+    aic: float = math.nan
+    bic: float = math.nan
+    J: float = math.nan
+    step_fit_percent: float | None = None
+    dwell_fit_percent: float | None = None
+    traces: list[ServoTrace] = field(default_factory=list, repr=False)
+    warnings: list[str] = field(default_factory=list)
+
+    def predict(self, trace: ServoTrace, time_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+        """The model's angle for ``trace``'s input, on its rest angle when it was fitted (else 0)."""
+        return simulate_trace(trace, self.structure, self.params, time_s=time_s) + self.offsets.get(trace.label, 0.0)
+
+    @property
+    def nonlinear_parameter(self) -> str | None:
+        """The structure's own parameter's name (None for the linear model)."""
+        return NONLINEAR_PARAMETER.get(self.structure)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain types: structure, parameters, errors, intervals, costs and fits."""
+        return jsonable({
+            "structure": self.structure, **self.params, "stderr": dict(self.stderr),
+            "ci95": {k: list(v) for k, v in self.ci95.items()}, "fixed": list(self.fixed),
+            "chi2": self.chi2, "n_samples": self.n_samples, "n_free": self.n_free, "aic": self.aic, "bic": self.bic,
+            "J": self.J, "step_fit_percent": self.step_fit_percent, "dwell_fit_percent": self.dwell_fit_percent,
+            "noise_rad": dict(self.sigma), "rest_angle_rad": dict(self.offsets), "warnings": list(self.warnings)})
+
+    @classmethod
+    def from_summary(cls, data: dict[str, Any]) -> "ServoModelFit":
+        """Rebuild from :meth:`summary` (without the traces)."""
+        names = [*LINEAR_PARAMETERS, *([NONLINEAR_PARAMETER[data["structure"]]]
+                                       if data["structure"] in NONLINEAR_PARAMETER else [])]
+
+        def num(v: Any) -> float:
+            return math.nan if v is None else float(v)
+
+        return cls(data["structure"], {k: num(data[k]) for k in names}, {k: num(v) for k, v in data["stderr"].items()},
+                   {k: (num(v[0]), num(v[1])) for k, v in data["ci95"].items()}, tuple(data["fixed"]),
+                   num(data["chi2"]), int(data["n_samples"]), int(data["n_free"]),
+                   {k: num(v) for k, v in (data.get("rest_angle_rad") or {}).items()},
+                   {k: num(v) for k, v in data["noise_rad"].items()}, num(data["aic"]), num(data["bic"]),
+                   num(data["J"]), data["step_fit_percent"], data["dwell_fit_percent"],
+                   warnings=list(data["warnings"]))
+
+    def to_pandas(self) -> Any:
+        """One row per parameter: value, stderr, 95 % interval, held."""
+        pd = import_pandas()
+        return pd.DataFrame([{"parameter": k, "value": v, "stderr": self.stderr.get(k), "ci95_low": self.ci95[k][0],
+                              "ci95_high": self.ci95[k][1], "fixed": k in self.fixed}
+                             for k, v in self.params.items()]).set_index("parameter")
+
+    def plot(self, ax: Any = None) -> list[Any]:
+        """Each trace measured (dots) and the model (line), the rest angle taken off, stacked."""
+        import matplotlib.pyplot as plt
+
+        ax = ax or plt.gca()
+        lines: list[Any] = []
+        for i, tr in enumerate(self.traces):
+            shift = 3.0 * i * max(float(np.ptp(tr.angle_rad)), 1e-9)
+            off = self.offsets.get(tr.label, 0.0)
+            lines += ax.plot(tr.time_s - tr.t0_s, tr.angle_rad - off + shift, ".", ms=2, color="0.5")
+            lines += ax.plot(tr.time_s - tr.t0_s, simulate_trace(tr, self.structure, self.params) + shift, "-", lw=1)
+        ax.set_xlabel("time after the input's start (s)")
+        ax.set_ylabel("angle (rad), tests stacked")
+        ax.set_title(f"{self.structure} model against the measured traces")
+        return lines
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{k}</td><td>{v:.6g}</td><td>{self.stderr.get(k, 0):.3g}</td>"
+                       f"<td>{'held' if k in self.fixed else ''}</td></tr>" for k, v in self.params.items())
+        return (f"<b>{self.structure} servo model</b> (J = {self.J:.3g}, step fit "
+                f"{self.step_fit_percent if self.step_fit_percent is not None else float('nan'):.1f} %)"
+                f"<table><tr><th>parameter</th><th>value</th><th>stderr</th><th></th></tr>{rows}</table>")
+
+
+def _group(trace: ServoTrace) -> str:
+    return "step" if trace.kind == "step" else "dwells"
+
+
+class _Problem:
+    """The residual of one structure over the traces, with some parameters held."""
+
+    def __init__(self, traces: list[ServoTrace], structure: str, values: dict[str, float], free: list[str],
+                 sigma: dict[str, float]):
+        self.traces, self.structure, self.values, self.free = traces, structure, dict(values), free
+        self.weight = [1.0 / sigma[_group(tr)] for tr in traces]
+
+    def params(self, x: NDArray[np.float64]) -> dict[str, float]:
+        p = dict(self.values)
+        for name, v in zip(self.free, x):
+            p[name] = math.exp(v) if name in _POSITIVE else float(v)
+        return p
+
+    def x(self, params: dict[str, float]) -> NDArray[np.float64]:
+        return np.array([math.log(params[n]) if n in _POSITIVE else params[n] for n in self.free])
+
+    def residual(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        p = self.params(x)
+        out = []
+        for tr, w in zip(self.traces, self.weight):
+            r = tr.angle_rad - simulate_trace(tr, self.structure, p)
+            out.append(w * (r - r.mean()))  # the rest angle, projected out
+        return np.concatenate(out)
+
+    def offsets(self, params: dict[str, float]) -> dict[str, float]:
+        return {tr.label: float(np.mean(tr.angle_rad - simulate_trace(tr, self.structure, params)))
+                for tr in self.traces}
+
+
+def _x_bounds(problem: _Problem, bounds: dict[str, tuple[float, float]]) -> tuple[NDArray, NDArray]:
+    lo, hi = [], []
+    for name in problem.free:
+        a, b = bounds.get(name, _DEFAULT_BOUNDS.get(name, (0.0, math.inf)))
+        if name in _POSITIVE:
+            a, b = math.log(max(a, 1e-12)), (math.log(b) if math.isfinite(b) else math.inf)
+        lo.append(a)
+        hi.append(b)
+    return np.array(lo), np.array(hi)
+
+
+def _solve(problem: _Problem, starts: list[dict[str, float]], bounds: dict[str, tuple[float, float]]):
+    """The best of least-squares runs from ``starts`` (each clipped into the bounds)."""
+    lo, hi = _x_bounds(problem, bounds)
+    best = None
+    for start in starts:
+        x0 = problem.x(start)
+        margin = 1e-9 * (1.0 + np.abs(x0))
+        x0 = np.where(np.isfinite(lo), np.maximum(x0, lo + margin), x0)
+        x0 = np.where(np.isfinite(hi), np.minimum(x0, hi - margin), x0)
+        sol = least_squares(problem.residual, x0, bounds=(lo, hi), x_scale="jac", diff_step=1e-6, max_nfev=400)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return best
+
+
+def _fundamental(trace: ServoTrace, y: NDArray[np.float64]) -> complex:
+    """A dwell's complex gain (output over input, phase against the input's sine) in its steady window."""
+    lo, hi = trace.window_s or (trace.t0_s, math.inf)
+    inside = (trace.time_s >= lo) & (trace.time_s <= hi)
+    w = 2.0 * math.pi * float(trace.frequency_hz) * (trace.time_s[inside] - trace.t0_s)
+    design = np.column_stack([np.sin(w), np.cos(w), np.ones_like(w)])
+    (a, b, _), *_ = np.linalg.lstsq(design, y[inside], rcond=None)
+    # M·sin(w + φ) = M·cos φ·sin w + M·sin φ·cos w: (a, b) is M·e^{jφ}.
+    return complex(a, b) / trace.amplitude
+
+
+def dwell_cost(params: dict[str, float], structure: str, traces: list[ServoTrace],
+               response: dict[str, tuple[float, float, float]]) -> float:
+    """CIFER's J of a model's fundamentals against the measured ones, over the dwells in ``response``.
+
+    ``response`` maps a dwell's label to its measured (gain, phase in degrees, coherence); the
+    model's fundamental is taken from its simulated trace in the dwell's window, as the
+    measured one was.
+    """
+    db, deg, coh = [], [], []
+    for tr in traces:
+        if tr.kind != "sine" or tr.label not in response:
+            continue
+        gain, phase_deg, coherence = response[tr.label]
+        model = _fundamental(tr, simulate_trace(tr, structure, params))
+        db.append(20.0 * math.log10(max(abs(model) / gain, 1e-6)))  # a model that does not move: -120 dB
+        deg.append((math.degrees(math.atan2(model.imag, model.real)) - phase_deg + 180.0) % 360.0 - 180.0
+                   if math.isfinite(phase_deg) else math.nan)
+        coh.append(coherence)
+    return cifer_cost(db, deg, coh) if db else math.nan
+
+
+def _nonlinear_starts(traces: list[ServoTrace], structure: str, gain: float) -> tuple[list[float], tuple]:
+    """Starting values and default bounds of a structure's parameter, from the tests' sizes.
+
+    The last start is where the structure is all but linear (a play of almost nothing, a
+    limit far beyond every slew or swing), so the fit is never worse than the linear model's.
+    """
+    swing = [0.5 * float(np.ptp(tr.angle_rad)) for tr in traces]
+    if structure == "backlash":
+        s = float(np.median(swing))
+        return [0.03 * s, 0.15 * s, 0.5 * s, 1e-3 * s], (1e-5 * s, 4.0 * s)
+    if structure == "quantization":
+        # Profiled on its grid (no starts): from a step that changes nothing to twice the smallest sine.
+        amp = min(tr.amplitude for tr in traces)
+        return [], (amp / 1000.0, 2.0 * amp)
+    if structure == "saturation":
+        s = max(swing)
+        return [0.8 * s, 1.0 * s, 1.3 * s, 50.0 * s], (0.05 * s, 100.0 * s)
+    # A step's slew is unbounded; the sines' largest, or the step's size over 10 ms, sets the scale.
+    slew = max(abs(gain) * tr.amplitude * (2.0 * math.pi * tr.frequency_hz if tr.kind == "sine" else 100.0)
+               for tr in traces)
+    return [0.3 * slew, 0.7 * slew, 1.5 * slew, 1e3 * slew], (1e-3 * slew, 1e4 * slew)
+
+
+def _quantization_profile(traces, starts, free, sigma, bounds) -> tuple[list[float], list[Any], float]:
+    """The best fit at each quantization step on a log grid (each from the last), refined around the best."""
+    lo, hi = bounds["quantization_step"]
+    grid = list(np.geomspace(lo, hi, 28))
+    sols: list[Any] = []
+    values = dict(starts[0])
+    for q in grid:
+        problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma)
+        sols.append(_solve(problem, starts, bounds))
+        starts = [{**values, **problem.params(sols[-1].x)}]
+    k = int(np.argmin([s.cost for s in sols]))
+    best = {**values, **dict(zip(free, (math.exp(v) if n in _POSITIVE else float(v)
+                                        for n, v in zip(free, sols[k].x))))}
+    for q in np.geomspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], 17):
+        problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma)
+        sols.append(_solve(problem, [best], bounds))
+        grid.append(float(q))
+    return grid, sols, float(grid[int(np.argmin([s.cost for s in sols]))])
+
+
+def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
+                    start: dict[str, float] | list[dict[str, float]] | None = None,
+                    fix: dict[str, float] | None = None, bounds: dict[str, tuple[float, float]] | None = None,
+                    sigma: dict[str, float] | None = None,
+                    response: dict[str, tuple[float, float, float]] | None = None,
+                    t0_stderr_s: float = 0.0) -> ServoModelFit:
+    """Fit one block structure to whole traces (see the module's description).
+
+    Parameters
+    ----------
+    traces : list of ServoTrace
+        The dwells and/or the step.
+    structure : str
+        One of ``"linear"``, ``"rate_limit"``, ``"backlash"``, ``"quantization"``, ``"saturation"``.
+    start : dict or list of dict, optional
+        Starting values of ``gain``, ``natural_frequency_rad_s``, ``damping_ratio``,
+        ``dead_time_s`` (the frequency-domain fit's, say), or several sets; a structure's
+        own parameter may be given too (else it starts from several values scaled to the
+        tests). Default: the best points of a coarse grid over the linear model
+        (:func:`linear_starts`).
+    fix, bounds : dict, optional
+        Parameters held at a value, or within ``(lo, hi)``.
+    sigma : dict, optional
+        Noise (rad) of each data set, ``"dwells"`` and ``"step"``; default the traces' measured noise.
+    response : dict, optional
+        The dwells' measured (gain, phase_deg, coherence) by label, for CIFER's J.
+    t0_stderr_s : float
+        The input starts' standard error, added to the dead time's.
+
+    Returns
+    -------
+    ServoModelFit
+
+    Raises
+    ------
+    ServoscopeError
+        An unknown structure or parameter, no traces, or fewer samples than parameters.
+    """
+    if structure not in STRUCTURES:
+        raise ServoscopeError(f"unknown model structure {structure!r} (choose from {', '.join(STRUCTURES)})")
+    if not traces:
+        raise ServoscopeError("a time-domain fit needs at least one test")
+    fix, bounds = dict(fix or {}), dict(bounds or {})
+    check_servo_held(structure, fix, bounds)
+    names = list(LINEAR_PARAMETERS) + ([NONLINEAR_PARAMETER[structure]] if structure in NONLINEAR_PARAMETER else [])
+    sigma = sigma or _measured_noise(traces)
+    starts = linear_starts(traces, sigma) if start is None else [start] if isinstance(start, dict) else list(start)
+    starts = [{**s, **fix} for s in starts]
+    values = {**{k: float(starts[0][k]) for k in LINEAR_PARAMETERS}, **fix}
+    nl = NONLINEAR_PARAMETER.get(structure)
+    if nl is not None and nl not in bounds:
+        bounds[nl] = _nonlinear_starts(traces, structure, values["gain"])[1]
+    free = [n for n in names if n not in fix]
+    if sum(tr.time_s.size for tr in traces) <= len(free) + len(traces):
+        raise ServoscopeError(f"{sum(tr.time_s.size for tr in traces)} samples cannot fit {len(free)} parameters "
+                              f"and {len(traces)} rest angles")
+    profile = None
+    if structure == "quantization" and nl not in fix:
+        free.remove(nl)
+        grid, sols, q = _quantization_profile(traces, starts, free, sigma, bounds)
+        profile = (grid, [2.0 * s.cost for s in sols])
+        values[nl] = q
+        sol = sols[int(np.argmin(profile[1]))]
+    else:
+        problem = _Problem(traces, structure, values, free, sigma)
+        if nl is not None and nl not in fix:
+            starts = [s if nl in s else {**s, nl: v} for s in starts
+                      for v in _nonlinear_starts(traces, structure, s["gain"])[0]]
+        sol = _solve(problem, starts, bounds)
+    problem = _Problem(traces, structure, values, free, sigma)
+    return _finish(problem, sol, structure, names, fix, bounds, profile, response, t0_stderr_s, sigma)
+
+
+def linear_starts(traces: list[ServoTrace], sigma: dict[str, float], keep: int = 3) -> list[dict[str, float]]:
+    """The ``keep`` best points of a coarse grid over the linear model's ωn, ζ and dead time.
+
+    The gain is solved for at each point (the linear model is linear in it), so the grid
+    needs no gain axis; the result does not depend on another fit having worked.
+    """
+    sines = [tr.frequency_hz for tr in traces if tr.kind == "sine"]
+    f_lo, f_hi = (min(sines), max(sines)) if sines else (0.5, 20.0)
+    scored = []
+    for wn in np.geomspace(2.0 * math.pi * f_lo * 0.5, 2.0 * math.pi * f_hi * 2.0, 8):
+        for zeta in (0.25, 0.6, 1.0, 1.6):
+            for tau in (0.0, 0.01, 0.03, 0.06, 0.1, 0.15, 0.25, 0.4):
+                p = {"gain": 1.0, "natural_frequency_rad_s": wn, "damping_ratio": zeta, "dead_time_s": tau}
+                unit, meas = [], []
+                for tr in traces:
+                    w = 1.0 / sigma[_group(tr)]
+                    u = simulate_trace(tr, "linear", p)
+                    unit.append(w * (u - u.mean()))
+                    meas.append(w * (tr.angle_rad - tr.angle_rad.mean()))
+                u, y = np.concatenate(unit), np.concatenate(meas)
+                k = float(u @ y) / float(u @ u) if float(u @ u) > 0 else 0.0
+                scored.append((float(np.sum((y - k * u) ** 2)), {**p, "gain": k if k != 0 else 1e-6}))
+    scored.sort(key=lambda c: c[0])
+    return [p for _, p in scored[:keep]]
+
+
+def _measured_noise(traces: list[ServoTrace]) -> dict[str, float]:
+    out: dict[str, list[float]] = {}
+    for tr in traces:
+        out.setdefault(_group(tr), []).append(tr.noise_rad)
+    return {k: float(np.median(v)) for k, v in out.items()}
+
+
+def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: dict[str, float],
+            bounds: dict[str, tuple[float, float]], profile: tuple | None, response: dict | None,
+            t0_stderr_s: float, sigma: dict[str, float]) -> ServoModelFit:
+    """Parameters, their errors and intervals, and the fit's costs, from the solver's answer."""
+    params = problem.params(sol.x)
+    residual = problem.residual(sol.x)
+    chi2 = float(residual @ residual)
+    n = residual.size
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore", RuntimeWarning)
+        cov = hac_covariance(sol.jac, residual) if problem.free else np.zeros((0, 0))
+    stderr = {k: 0.0 for k in names}
+    warnings: list[str] = []
+    for i, name in enumerate(problem.free):
+        se_x = math.sqrt(cov[i, i]) if np.isfinite(cov[i, i]) and cov[i, i] >= 0 else math.nan
+        stderr[name] = se_x * params[name] if name in _POSITIVE else se_x  # the log scale's delta method
+    if "dead_time_s" in problem.free:
+        stderr["dead_time_s"] = math.hypot(stderr["dead_time_s"], t0_stderr_s)
+    ci95 = {k: (params[k] - _Z95 * stderr[k], params[k] + _Z95 * stderr[k]) for k in names}
+    for name in problem.free:
+        if name in _POSITIVE and stderr[name] > 0:
+            # Log-scale parameters: a log-normal interval (never below 0).
+            f = math.exp(min(_Z95 * stderr[name] / params[name], 50.0))
+            ci95[name] = (params[name] / f, params[name] * f)
+    nl = NONLINEAR_PARAMETER.get(structure)
+    if profile is not None:
+        grid, cost = np.asarray(profile[0]), np.asarray(profile[1])
+        inside = grid[cost - cost.min() <= _CHI2_1_95 * max(chi2 / max(n - len(names), 1), 1.0)]
+        ci95[nl] = (float(inside.min()), float(inside.max()))
+        stderr[nl] = (ci95[nl][1] - ci95[nl][0]) / (2 * _Z95)
+        params[nl] = float(grid[int(np.argmin(cost))])
+    for name in problem.free:
+        lo, hi = bounds.get(name, _DEFAULT_BOUNDS.get(name, (0.0, math.inf)))
+        if min(abs(params[name] - lo), abs(params[name] - hi)) <= 1e-6 * max(abs(params[name]), 1e-12):
+            warnings.append(f"{structure} model: {name} ended at its limit ({params[name]:.4g}); its interval "
+                            "is not a measurement")
+    fit = ServoModelFit(structure, params, stderr, ci95, tuple(k for k in names if k in fix), chi2, n,
+                        len(names) - len(fix) + len(problem.traces), problem.offsets(params), dict(sigma),
+                        traces=list(problem.traces), warnings=warnings)
+    step = [tr for tr in problem.traces if tr.kind == "step"]
+    dwells = [tr for tr in problem.traces if tr.kind == "sine"]
+    if step:
+        fit.step_fit_percent = fit_percent(step[0].angle_rad, fit.predict(step[0]))
+    if dwells:
+        fit.dwell_fit_percent = fit_percent(np.concatenate([tr.angle_rad - fit.offsets[tr.label] for tr in dwells]),
+                                            np.concatenate([fit.predict(tr) - fit.offsets[tr.label] for tr in dwells]))
+    if response:
+        fit.J = dwell_cost(params, structure, problem.traces, response)
+    return fit
+
+
+@dataclass
+class ServoModelSelection:
+    """Every structure tried, the one selected, and the cross-validation between the dwells and the step.
+
+    Attributes
+    ----------
+    candidates : list of ServoModelFit
+        One per structure, each with its AIC and BIC.
+    selected : ServoModelFit
+    scale : float
+        The cost's unit in AIC/BIC: the best candidate's residual variance (in noise units) times
+        its autocorrelation factor.
+    cross_validation : dict
+        ``dwells_to_step`` (the model fitted to the dwells alone, its fit on the step in
+        percent), ``step_to_dwells`` (fitted to the step alone, its J on the dwells) and a
+        ``verdict``; absent parts are None.
+    """
+
+    candidates: list[ServoModelFit]
+    selected: ServoModelFit
+    scale: float
+    cross_validation: dict[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain types: the selected structure, every candidate's fit, the cross-validation."""
+        return jsonable({"selected": self.selected.structure, "scale": self.scale,
+                         "candidates": [c.summary() for c in self.candidates],
+                         "cross_validation": dict(self.cross_validation)})
+
+    @classmethod
+    def from_summary(cls, data: dict[str, Any]) -> "ServoModelSelection":
+        """Rebuild from :meth:`summary` (the fits without their traces: they are the tracks')."""
+        fits = [ServoModelFit.from_summary(c) for c in data["candidates"]]
+        selected = next(f for f in fits if f.structure == data["selected"])
+        return cls(fits, selected, float(data["scale"]), dict(data.get("cross_validation") or {}))
+
+    def to_pandas(self) -> Any:
+        """One row per candidate structure."""
+        pd = import_pandas()
+        return pd.DataFrame([{"structure": c.structure, "aic": c.aic, "bic": c.bic, "J": c.J, "chi2": c.chi2,
+                              "step_fit_percent": c.step_fit_percent, "selected": c is self.selected}
+                             for c in self.candidates]).set_index("structure")
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{c.structure}{' (selected)' if c is self.selected else ''}</td><td>{c.bic:.1f}</td>"
+                       f"<td>{c.J:.3g}</td></tr>" for c in self.candidates)
+        return f"<table><tr><th>structure</th><th>BIC</th><th>J</th></tr>{rows}</table>"
+
+
+def _lag1(r: NDArray[np.float64]) -> float:
+    r = r - r.mean()
+    den = float(r @ r)
+    return min(max(float(r[1:] @ r[:-1]) / den, 0.0), 0.95) if den > 0 and r.size > 2 else 0.0
+
+
+def _information(fits: list[ServoModelFit]) -> float:
+    """AIC and BIC of each fit, in units of the best fit's residual variance (see the module's description)."""
+    best = min(fits, key=lambda f: f.chi2)
+    rho = _lag1(np.concatenate([(tr.angle_rad - best.predict(tr)) for tr in best.traces]))
+    factor = (1.0 + rho) / (1.0 - rho)
+    scale = max(best.chi2 / max(best.n_samples - best.n_free, 1), 1e-12) * factor
+    n_eff = max(best.n_samples / factor, 2.0)
+    for f in fits:
+        f.aic = f.chi2 / scale + 2.0 * f.n_free
+        f.bic = f.chi2 / scale + f.n_free * math.log(n_eff)
+    return scale
+
+
+def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | list[str], *,
+                       start: dict[str, float] | None = None, fix: dict[str, float] | None = None,
+                       bounds: dict[str, tuple[float, float]] | None = None,
+                       response: dict[str, tuple[float, float, float]] | None = None,
+                       t0_stderr_s: float = 0.0) -> ServoModelSelection:
+    """Fit the linear model and each structure in ``structures``; select by BIC; cross-validate.
+
+    Parameters
+    ----------
+    traces : list of ServoTrace
+    structures : sequence of str
+        Nonlinear structures to try beside the linear model (which is always tried).
+    start, fix, bounds, response, t0_stderr_s
+        As for :func:`fit_servo_model`; a held parameter a structure does not have is
+        refused (a nonlinear one is held only in its own structure).
+
+    Returns
+    -------
+    ServoModelSelection
+    """
+    tried = ["linear", *[s for s in structures if s != "linear"]]
+    fix, bounds = dict(fix or {}), dict(bounds or {})
+
+    def held(structure: str, d: dict) -> dict:
+        own = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(structure)}
+        return {k: v for k, v in d.items() if k in own}
+
+    known = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER}
+    for name in [*fix, *bounds]:
+        if name not in known:
+            check_servo_held(tried[-1], {name: 0.0}, None)  # its did-you-mean
+    sigma = _measured_noise(traces)
+    # The linear model from the given start (the frequency-domain fit's) and from a coarse grid, so
+    # that a frequency-domain fit gone wrong (a strongly nonlinear servo) does not decide the rest.
+    starts = ([start] if start else []) + linear_starts(traces, sigma)
+    first = [fit_servo_model(traces, "linear", start=starts, fix=held("linear", fix), bounds=held("linear", bounds))]
+    lin = {k: first[0].params[k] for k in LINEAR_PARAMETERS}
+    first += [fit_servo_model(traces, s, start=lin, fix=held(s, fix), bounds=held(s, bounds)) for s in tried[1:]]
+    best = min(first, key=lambda f: f.chi2)
+    for group in sigma:
+        r = np.concatenate([tr.angle_rad - best.predict(tr) for tr in best.traces if _group(tr) == group])
+        sigma[group] = max(sigma[group], float(np.sqrt(np.mean(r**2))))
+    fits = []
+    for s, f in zip(tried, first):
+        nl = NONLINEAR_PARAMETER.get(s)
+        warm = {**f.params} if s != "quantization" else {k: f.params[k] for k in LINEAR_PARAMETERS}
+        if nl is not None and s != "quantization":
+            warm[nl] = f.params[nl]
+        fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), sigma=sigma,
+                                    response=response, t0_stderr_s=t0_stderr_s))
+    scale = _information(fits)
+    linear = fits[0]
+    selected = min(fits[1:], key=lambda f: f.bic, default=linear)
+    if selected is not linear and not linear.bic - selected.bic > BIC_MARGIN:
+        selected = linear
+    if len(structures) == 1 and structures[0] != "linear":
+        selected = fits[1]  # asked for by name: that structure, the others for comparison
+    cv = cross_validate(traces, selected, sigma=sigma, response=response, fix=held(selected.structure, fix),
+                        bounds=held(selected.structure, bounds))
+    return ServoModelSelection(fits, selected, scale, cv)
+
+
+def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dict[str, float],
+                   response: dict | None = None, fix: dict | None = None, bounds: dict | None = None
+                   ) -> dict[str, Any]:
+    """Fit the model's structure to the dwells alone and predict the step, and the reverse.
+
+    Returns
+    -------
+    dict
+        ``dwells_to_step``: ``{"fit_percent"}`` of the step predicted by the dwells' fit (its
+        rest angle the step's own, from the samples before the input arrived);
+        ``step_to_dwells``: ``{"J"}`` of the dwells predicted by the step's fit; ``verdict``.
+    """
+    dwells = [tr for tr in traces if tr.kind == "sine"]
+    steps = [tr for tr in traces if tr.kind == "step"]
+    out: dict[str, Any] = {"dwells_to_step": None, "step_to_dwells": None, "verdict": None}
+    if not (dwells and steps):
+        out["verdict"] = "not done: cross-validation needs both dwells and a step"
+        return out
+    start = dict(model.params)
+    problems = []
+    try:
+        from_dwells = fit_servo_model(dwells, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        step = steps[0]
+        predicted = simulate_trace(step, model.structure, from_dwells.params)
+        rest = float(np.mean((step.angle_rad - predicted)[step.time_s < step.t0_s + from_dwells.params["dead_time_s"]])
+                     ) if np.any(step.time_s < step.t0_s) else float(np.mean(step.angle_rad - predicted))
+        out["dwells_to_step"] = {"fit_percent": fit_percent(step.angle_rad, predicted + rest)}
+    except ServoscopeError as exc:
+        problems.append(f"dwells → step not done ({exc})")
+    try:
+        from_step = fit_servo_model(steps, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        if response:
+            out["step_to_dwells"] = {"J": dwell_cost(from_step.params, model.structure, dwells, response)}
+    except ServoscopeError as exc:
+        problems.append(f"step → dwells not done ({exc})")
+    out["verdict"] = _verdict(out, problems)
+    return out
+
+
+#: The step's fit (percent) a model must reach to be said to predict it.
+STEP_FIT_PREDICTS = 90.0
+
+
+def _verdict(cv: dict[str, Any], problems: list[str]) -> str:
+    parts = []
+    d2s, s2d = cv["dwells_to_step"], cv["step_to_dwells"]
+    if d2s is not None:
+        ok = d2s["fit_percent"] >= STEP_FIT_PREDICTS
+        parts.append(f"the dwells' model {'predicts' if ok else 'does not predict'} the step "
+                     f"(fit {d2s['fit_percent']:.1f} %)")
+    if s2d is not None and math.isfinite(s2d["J"]):
+        ok = s2d["J"] <= 100.0
+        parts.append(f"the step's model {'predicts' if ok else 'does not predict'} the dwells (J {s2d['J']:.3g})")
+    return "; ".join(parts + problems) or "not done"
