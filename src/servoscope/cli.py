@@ -416,19 +416,27 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
               help="Hold a model parameter at a value (e.g. damping_ratio=0.8); repeatable.")
 @click.option("--bound", "bound_text", multiple=True, metavar="NAME=LOW:HIGH",
               help="Keep a model parameter within limits (e.g. natural_frequency_rad_s=20:80); repeatable.")
+@click.option("--nonlinear", type=click.Choice(["none", "auto", "linear", "rate_limit", "backlash", "quantization",
+                                                "saturation"]), default="none", show_default=True,
+              help="Also fit models to the dwells' and the step's whole traces: linear, one nonlinear structure beside "
+                   "it, or auto (every structure, selected by BIC). none: the frequency-domain fit alone.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
              workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
-             bound_text: tuple[str, ...]) -> None:
+             bound_text: tuple[str, ...], nonlinear: str) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
     from .report import write_report
+    from .campaign.joint import check_nonlinear, split_held
     from .sysid import check_held
 
     order = _parse_order(order_text)
     fix, bounds = _parse_held(fix_text, bound_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
-    check_held(order, "minimum_phase", *manifest.held_parameters(fix, bounds))
+    held = manifest.held_parameters(fix, bounds)
+    check_nonlinear(manifest, nonlinear, order, *held)
+    fr_fix, fr_bounds, _, _ = split_held(*held)
+    check_held(order, "minimum_phase", fr_fix, fr_bounds)
     _check_out_dir(out_dir, manifest)
     failures: dict[str, str] = {}
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
@@ -439,7 +447,7 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if failures:
         manifest = manifest.without(failures)
     result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
-                          fix=fix or None, bounds=bounds or None)
+                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear)
     paths = write_report(result, out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
@@ -533,9 +541,40 @@ def _print_model(result, truth: dict | None = None) -> None:
             cells += [_fmt(true), diff]
         table.add_row(*cells)
     Console(highlight=False, width=112).print(table)
+    if result.servo_model is not None:
+        _print_servo_model(result, truth)
     # Warnings to stderr, as `track` does: the table on stdout stays what a script parses.
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
+
+
+def _print_servo_model(result, truth: dict | None) -> None:
+    """The time-domain models: each candidate's BIC, J and step fit; the selected one's parameters."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .report.numbers import format_interval, format_with_uncertainty
+
+    sel = result.servo_model.selected
+    table = Table(title=f"time-domain models (dwells and step together): {sel.structure} selected")
+    for col in ("structure", "BIC", "CIFER J (dwells)", "step fit"):
+        table.add_column(col, justify="right")
+    for c in result.servo_model.candidates:
+        table.add_row(c.structure + (" ✓" if c is sel else ""), f"{c.bic:.1f}", f"{c.J:.3g}",
+                      "—" if c.step_fit_percent is None else f"{c.step_fit_percent:.2f} %")
+    params = Table(title=f"{sel.structure} model")
+    for col in ("parameter", "identified", "± std. error", "95 % interval", *(("truth",) if truth else ())):
+        params.add_column(col, justify="right")
+    true = (truth or {}).get("model", {})
+    for name, value in sel.params.items():
+        v, e = format_with_uncertainty(value, sel.stderr.get(name))
+        lo, hi = sel.ci95[name]
+        params.add_row(name + (" (held)" if name in sel.fixed else ""), v, e, format_interval(lo, hi, sel.stderr[name]),
+                       *((_fmt(true.get(name)),) if truth else ()))
+    console = Console(highlight=False, width=112)
+    console.print(table)
+    console.print(params)
+    console.print(f"cross-validation: {result.servo_model.cross_validation.get('verdict')}")
 
 
 def _fmt(value) -> str:

@@ -62,6 +62,9 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
                                   f"{next(s for s, p in NONLINEAR_PARAMETER.items() if p == own[0])} (or auto)")
         return
     tried = structures_of(nonlinear)
+    for name in [*fix, *bounds]:
+        if name not in LINEAR_PARAMETERS and name not in NONLINEAR_PARAMETER.values():
+            check_servo_held(tried[-1], {name: 0.0}, None)  # one line, with a did-you-mean
     for name in own:
         if not any(NONLINEAR_PARAMETER.get(s) == name for s in tried):
             raise ServoscopeError(f"{name} belongs to a structure --nonlinear {nonlinear} does not fit")
