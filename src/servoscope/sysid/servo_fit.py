@@ -32,12 +32,13 @@ from __future__ import annotations
 import math
 import warnings as _warnings
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from ..errors import ServoscopeError
 from ..results import import_pandas, jsonable
@@ -607,6 +608,17 @@ def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | l
     -------
     ServoModelSelection
     """
+    with threadpool_limits(1):  # see pyproject.toml: small matrices, many of them
+        return _select(traces, structures, start, fix, bounds, response, t0_stderr_s)
+
+
+def _select(traces, structures, start, fix, bounds, response, t0_stderr_s) -> ServoModelSelection:
+    """:func:`select_servo_model`'s work (see there).
+
+    Long because it is the selection's order written out: a first fit of each structure, the
+    data sets' weights from the best, a second fit, the information criteria, the choice,
+    the jackknife and the cross-validation.
+    """
     tried = ["linear", *[s for s in structures if s != "linear"]]
     fix, bounds = dict(fix or {}), dict(bounds or {})
 
@@ -630,7 +642,15 @@ def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | l
         r = np.concatenate([tr.angle_rad - best.predict(tr) for tr in best.traces if _group(tr) == group])
         sigma[group] = max(sigma[group], float(np.sqrt(np.mean(r**2))))
     fits = []
+    # Refitted with these weights: the linear model and the two best; the rest (far worse) keep
+    # their fits, their costs in the new weights.
+    refit = {"linear", *sorted(tried, key=lambda s: first[tried.index(s)].chi2)[:2]}
     for s, f in zip(tried, first):
+        if s not in refit:
+            chi2 = sum(float(np.sum(((tr.angle_rad - f.predict(tr)) / sigma[_group(tr)]) ** 2)) for tr in f.traces)
+            fits.append(replace(f, chi2=chi2, sigma=dict(sigma),
+                                J=dwell_cost(f.params, s, traces, response) if response else math.nan))
+            continue
         nl = NONLINEAR_PARAMETER.get(s)
         warm = {**f.params} if s != "quantization" else {k: f.params[k] for k in LINEAR_PARAMETERS}
         if nl is not None and s != "quantization":
