@@ -485,6 +485,8 @@ def identify(
                     model_se = step_dead_time_model_stderr(model, run_step)
                     step = replace(step, dead_time_stderr_s=math.hypot(step.dead_time_stderr_s, model_se))
             except ServoscopeError as exc:
+                # Also when the analysis stood and only its dead time's model error failed: left out whole.
+                step = None
                 warnings.append(f"{test.label}: step test left out: {exc}")
             else:
                 if not step.output_moved:

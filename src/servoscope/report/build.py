@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .figures import amplitude_figure, bode_figure, dwell_figure, overlay_figure, step_figure
+from .figures import amplitude_figure, bode_figure, dwell_figure, overlay_figure, servo_traces_figure, step_figure
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -228,6 +228,9 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                "column is how much the other frames' amplitude differs (docs/accuracy.md, \"The codec check\").")
     sections.append(s)
 
+    if result.servo_model is not None:
+        sections.append(_servo_model_section(result, figures_dir))
+
     label = _representative_dwell(result)
     fit = result.sine_fits[label]
     track = result.tracks[label]
@@ -323,6 +326,33 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         sections.append(s)
 
     return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}", sections)
+
+
+def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportSection:
+    """The time-domain models (``identify --nonlinear``): candidates, the selected one, the cross-validation."""
+    selection = result.servo_model
+    sel = selection.selected
+    s = ReportSection("One model for the sines and the step", figures_dir=figures_dir)
+    s.text("Each candidate simulated for every test and fitted to the whole measured traces (the dwells' harmonics "
+           "and transients, and the step), each data set weighted by its own noise; selected by BIC (a nonlinear "
+           "structure must beat the linear model by 10). CIFER's J compares each model's fundamentals with the "
+           "measured frequency response; the step's fit is MATLAB compare's, 100·(1 − ‖y − ŷ‖/‖y − ȳ‖).")
+    s.table(["structure", "BIC", "CIFER J (dwells)", "step fit (%)", "selected"],
+            [[c.structure, format_value(c.bic, 6), format_value(c.J, 3),
+              "—" if c.step_fit_percent is None else f"{c.step_fit_percent:.2f}", "✓" if c is sel else ""]
+             for c in selection.candidates])
+    rows = []
+    for name, value in sel.params.items():
+        v, e = format_with_uncertainty(value, sel.stderr.get(name))
+        lo, hi = sel.ci95[name]
+        rows.append([PARAM_LABELS.get(name, name) + (" (held fixed)" if name in sel.fixed else ""), v, e,
+                     format_interval(lo, hi, sel.stderr[name])])
+    s.table([f"{sel.structure} model", "value", "± s.e.", "95 % interval"], rows)
+    s.text(f"Cross-validation: {selection.cross_validation.get('verdict')}.")
+    if sel.traces:
+        s.figure(servo_traces_figure(sel), f"Each test measured (dots) and simulated by the {sel.structure} model "
+                 "(lines), its rest angle taken off, tests stacked.", "Measured and modelled traces", name="servo_traces")
+    return s
 
 
 def _segmentation(result: "IdentificationResult", track, lead, trail):

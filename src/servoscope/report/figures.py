@@ -226,3 +226,11 @@ def amplitude_figure(checks) -> Figure:
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def servo_traces_figure(fit) -> Figure:
+    """Each test's measured angle against the time-domain model's (``ServoModelFit.plot``), tests stacked."""
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    fit.plot(ax)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,64 @@
+"""identify --nonlinear on rendered footage (issue 17): the whole pipeline, result.json, the report, bad input.
+
+Oracle: the twin's truth (its servo's backlash and linear part).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from dataclasses import replace
+
+import pytest
+
+
+def test_backlash_found_in_rendered_footage(tmp_path):
+    from servoscope.campaign import identify
+    from servoscope.campaign.result import IdentificationResult
+    from servoscope.report import write_report
+    from servoscope.simulate import simulate_campaign
+    from servoscope.simulate.presets import get_preset
+
+    servo = replace(get_preset("quick").servo, backlash=0.004)
+    toml = simulate_campaign(tmp_path / "c", "quick", 1, width=480, height=384, codec="raw", servo=servo,
+                             sine_amplitudes=(0.05, 0.2))
+    res = identify(toml, workers=1, nonlinear="auto")
+    out = write_report(res, tmp_path / "out")
+    data = json.loads((tmp_path / "out" / "result.json").read_text())
+    model = data["model"]
+    assert model["structure"] == "backlash" and model["backlash_rad"] == pytest.approx(0.004, rel=0.1)
+    lo, hi = model["ci95"]["backlash_rad"]
+    assert lo <= 0.004 <= hi
+    assert [c["structure"] for c in model["candidates"]] == ["linear", "rate_limit", "backlash", "quantization",
+                                                             "saturation"]
+    selected = next(c for c in model["time_domain"]["candidates"] if c["structure"] == "backlash")
+    assert selected["gain"] == pytest.approx(servo.gain, rel=0.02)
+    assert selected["natural_frequency_rad_s"] == pytest.approx(37.0, rel=0.02)
+    # The step's fit by the selected model, and as the dwells' model alone predicts it.
+    assert selected["step_fit_percent"] > 99
+    assert model["time_domain"]["cross_validation"]["dwells_to_step"]["fit_percent"] > 95
+    if data["step"] is not None:  # the frequency-domain model's step analysis (it may not stand here)
+        assert data["step"]["fit_percent"] == selected["step_fit_percent"]
+    assert model["fixed"] == []
+    html = out["report"].read_text()
+    assert "One model for the sines and the step" in html and "Measured and modelled traces" in html
+    again = IdentificationResult.load(tmp_path / "out")
+    assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)
+
+
+def test_bad_nonlinear_requests_are_one_line_and_write_nothing(quick_campaign, tmp_path):
+    def run(*args):
+        out = tmp_path / f"o{len(list(tmp_path.iterdir()))}"
+        p = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(quick_campaign), "--out", str(out),
+                            *args], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+        assert not out.exists()
+        return p.stderr
+
+    # The quick preset has 4 dwells: a nonlinear structure's 5 parameters need 5.
+    assert "fits 5 parameters but the campaign has 4 sine dwell(s)" in run("--nonlinear", "backlash")
+    assert "did you mean 'backlash_rad'" in run("--nonlinear", "backlash", "--fix", "backlash=0.1")
+    assert "add --nonlinear backlash" in run("--fix", "backlash_rad=0.01")
+    assert "use --order 2" in run("--nonlinear", "linear", "--order", "3")
