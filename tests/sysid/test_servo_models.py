@@ -22,8 +22,8 @@ from servoscope.sysid.servo_fit import (
     dwell_cost,
     fit_percent,
     fit_servo_model,
-    select_servo_model,
 )
+from servoscope.sysid.servo_select import select_servo_model
 from servoscope.sysid.servo_sim import ServoTrace, simulate_trace
 
 PAPER = get_preset("quick").servo
@@ -196,7 +196,7 @@ def test_paper_nonlinear_preset_is_the_papers_puzzle_and_backlash_explains_it():
 
 def test_summary_round_trips_and_bad_names_are_refused():
     from servoscope.errors import ServoscopeError
-    from servoscope.sysid.servo_fit import ServoModelSelection
+    from servoscope.sysid.servo_select import ServoModelSelection
 
     traces, response = _campaign(ServoModel(PAPER.num, PAPER.den, dead_time_s=TAU, backlash=0.004), 0)
     sel = select_servo_model(traces, ["backlash"], response=response)

@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import ServoscopeError
 from ..markers.tracker import Track
-from ..sysid.servo_fit import ServoModelSelection, check_servo_held, fit_percent, select_servo_model
+from ..sysid.servo_fit import check_servo_held, fit_percent
+from ..sysid.servo_select import ServoModelSelection, select_servo_model
 from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 from .manifest import Campaign
 from .result import input_start

@@ -22,7 +22,7 @@ from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.linearity import AmplitudeCheck
 from ..sysid.modes import ModeFit
-from ..sysid.servo_fit import ServoModelSelection
+from ..sysid.servo_select import ServoModelSelection
 from ..sysid.servo_sim import NONLINEAR_PARAMETER
 from ..sysid.model_text import model_equation
 from ..sysid.step import unit_step_function

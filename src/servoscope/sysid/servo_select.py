@@ -1,0 +1,266 @@
+"""Model selection between the time-domain servo structures, and cross-validation (issue 17).
+
+See :mod:`servoscope.sysid.servo_fit` for the fits. :func:`select_servo_model` fits the
+linear model and each nonlinear structure asked for, weights the dwells and the step by
+their own noise, compares them by AIC and BIC in units of the best fit's residual variance
+(widened by its lag-1 autocorrelation, with the effective number of samples reduced by the
+same factor), and selects a nonlinear structure only when its BIC beats the linear model's by
+more than :data:`BIC_MARGIN` ("very strong" on Kass & Raftery's scale): a tracking artefact
+must not read as a nonlinearity. The selected model's errors are widened to the
+delete-one-test jackknife's where the tests disagree more than they say.
+"""
+
+from __future__ import annotations
+
+import math
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ..errors import ServoscopeError
+from ..results import import_pandas, jsonable
+from .servo_fit import (ServoModelFit, check_servo_held, dwell_cost, fit_percent, fit_servo_model, lag1,
+                        linear_starts, measured_noise, trace_group)
+from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
+
+__all__ = ["BIC_MARGIN", "STEP_FIT_PREDICTS", "ServoModelSelection", "cross_validate", "select_servo_model"]
+
+#: BIC a nonlinear structure must gain over the linear model to be selected.
+BIC_MARGIN = 10.0
+_Z95 = 1.959963984540054
+
+
+@dataclass
+class ServoModelSelection:
+    """Every structure tried, the one selected, and the cross-validation between the dwells and the step.
+
+    Attributes
+    ----------
+    candidates : list of ServoModelFit
+        One per structure, each with its AIC and BIC.
+    selected : ServoModelFit
+    scale : float
+        The cost's unit in AIC/BIC: the best candidate's residual variance (in noise units) times
+        its autocorrelation factor.
+    cross_validation : dict
+        ``dwells_to_step`` (the model fitted to the dwells alone, its fit on the step in
+        percent), ``step_to_dwells`` (fitted to the step alone, its J on the dwells) and a
+        ``verdict``; absent parts are None.
+    """
+
+    candidates: list[ServoModelFit]
+    selected: ServoModelFit
+    scale: float
+    cross_validation: dict[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain types: the selected structure, every candidate's fit, the cross-validation."""
+        return jsonable({"selected": self.selected.structure, "scale": self.scale,
+                         "candidates": [c.summary() for c in self.candidates],
+                         "cross_validation": dict(self.cross_validation)})
+
+    @classmethod
+    def from_summary(cls, data: dict[str, Any]) -> "ServoModelSelection":
+        """Rebuild from :meth:`summary` (the fits without their traces: they are the tracks')."""
+        fits = [ServoModelFit.from_summary(c) for c in data["candidates"]]
+        selected = next(f for f in fits if f.structure == data["selected"])
+        return cls(fits, selected, float(data["scale"]), dict(data.get("cross_validation") or {}))
+
+    def to_pandas(self) -> Any:
+        """One row per candidate structure."""
+        pd = import_pandas()
+        return pd.DataFrame([{"structure": c.structure, "aic": c.aic, "bic": c.bic, "J": c.J, "chi2": c.chi2,
+                              "step_fit_percent": c.step_fit_percent, "selected": c is self.selected}
+                             for c in self.candidates]).set_index("structure")
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{c.structure}{' (selected)' if c is self.selected else ''}</td><td>{c.bic:.1f}</td>"
+                       f"<td>{c.J:.3g}</td></tr>" for c in self.candidates)
+        return f"<table><tr><th>structure</th><th>BIC</th><th>J</th></tr>{rows}</table>"
+
+
+def _information(fits: list[ServoModelFit]) -> float:
+    """AIC and BIC of each fit, in units of the best fit's residual variance (see the module's description)."""
+    best = min(fits, key=lambda f: f.chi2)
+    rho = lag1(np.concatenate([(tr.angle_rad - best.predict(tr)) for tr in best.traces]))
+    factor = (1.0 + rho) / (1.0 - rho)
+    scale = max(best.chi2 / max(best.n_samples - best.n_free, 1), 1e-12) * factor
+    n_eff = max(best.n_samples / factor, 2.0)
+    for f in fits:
+        f.aic = f.chi2 / scale + 2.0 * f.n_free
+        f.bic = f.chi2 / scale + f.n_free * math.log(n_eff)
+    return scale
+
+
+def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | list[str], *,
+                       start: dict[str, float] | None = None, fix: dict[str, float] | None = None,
+                       bounds: dict[str, tuple[float, float]] | None = None,
+                       response: dict[str, tuple[float, float, float]] | None = None,
+                       t0_stderr_s: float = 0.0) -> ServoModelSelection:
+    """Fit the linear model and each structure in ``structures``; select by BIC; cross-validate.
+
+    Parameters
+    ----------
+    traces : list of ServoTrace
+    structures : sequence of str
+        Nonlinear structures to try beside the linear model (which is always tried).
+    start, fix, bounds, response, t0_stderr_s
+        As for :func:`fit_servo_model`; a held parameter a structure does not have is
+        refused (a nonlinear one is held only in its own structure).
+
+    Returns
+    -------
+    ServoModelSelection
+    """
+    with threadpool_limits(1):  # see pyproject.toml: small matrices, many of them
+        return _select(traces, structures, start, fix, bounds, response, t0_stderr_s)
+
+
+def _select(traces, structures, start, fix, bounds, response, t0_stderr_s) -> ServoModelSelection:
+    """The work of :func:`select_servo_model` (see there).
+
+    Long because it is the selection's order written out: a first fit of each structure, the
+    data sets' weights from the best, a second fit, the information criteria, the choice,
+    the jackknife and the cross-validation.
+    """
+    tried = ["linear", *[s for s in structures if s != "linear"]]
+    fix, bounds = dict(fix or {}), dict(bounds or {})
+
+    def held(structure: str, d: dict) -> dict:
+        own = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(structure)}
+        return {k: v for k, v in d.items() if k in own}
+
+    known = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER}
+    for name in [*fix, *bounds]:
+        if name not in known:
+            check_servo_held(tried[-1], {name: 0.0}, None)  # its did-you-mean
+    sigma = measured_noise(traces)
+    # The linear model from the given start (the frequency-domain fit's) and from a coarse grid, so
+    # that a frequency-domain fit gone wrong (a strongly nonlinear servo) does not decide the rest.
+    starts = ([start] if start else []) + linear_starts(traces, sigma)
+    first = [fit_servo_model(traces, "linear", start=starts, fix=held("linear", fix), bounds=held("linear", bounds))]
+    lin = {k: first[0].params[k] for k in LINEAR_PARAMETERS}
+    first += [fit_servo_model(traces, s, start=lin, fix=held(s, fix), bounds=held(s, bounds)) for s in tried[1:]]
+    best = min(first, key=lambda f: f.chi2)
+    for group in sigma:
+        r = np.concatenate([tr.angle_rad - best.predict(tr) for tr in best.traces if trace_group(tr) == group])
+        sigma[group] = max(sigma[group], float(np.sqrt(np.mean(r**2))))
+    fits = []
+    # Refitted with these weights: the linear model and the two best; the rest (far worse) keep
+    # their fits, their costs in the new weights.
+    refit = {"linear", *sorted(tried, key=lambda s: first[tried.index(s)].chi2)[:2]}
+    for s, f in zip(tried, first):
+        if s not in refit:
+            chi2 = sum(float(np.sum(((tr.angle_rad - f.predict(tr)) / sigma[trace_group(tr)]) ** 2)) for tr in f.traces)
+            fits.append(replace(f, chi2=chi2, sigma=dict(sigma),
+                                J=dwell_cost(f.params, s, traces, response) if response else math.nan))
+            continue
+        nl = NONLINEAR_PARAMETER.get(s)
+        warm = {**f.params} if s != "quantization" else {k: f.params[k] for k in LINEAR_PARAMETERS}
+        if nl is not None and s != "quantization":
+            warm[nl] = f.params[nl]
+        fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), sigma=sigma,
+                                    response=response, t0_stderr_s=t0_stderr_s))
+    scale = _information(fits)
+    linear = fits[0]
+    selected = min(fits[1:], key=lambda f: f.bic, default=linear)
+    if selected is not linear and not linear.bic - selected.bic > BIC_MARGIN:
+        selected = linear
+    if len(structures) == 1 and structures[0] != "linear":
+        selected = fits[1]  # asked for by name: that structure, the others for comparison
+    _jackknife(traces, selected, sigma, held(selected.structure, fix), held(selected.structure, bounds))
+    cv = cross_validate(traces, selected, sigma=sigma, response=response, fix=held(selected.structure, fix),
+                        bounds=held(selected.structure, bounds))
+    return ServoModelSelection(fits, selected, scale, cv)
+
+
+def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, float], fix: dict, bounds: dict) -> None:
+    """Widen ``fit``'s errors to the delete-one-test jackknife's where the tests disagree more than they say.
+
+    The sandwich errors describe the noise within each test; a tracking or rendering
+    systematic that differs from test to test (a sticker's sub-pixel bias, an exposure not
+    quite modelled) shows only between tests. Each test is left out in turn and the model
+    refitted from the full fit (the quantization step held at its profiled value: its
+    interval is the profile's). Needs at least 4 tests.
+    """
+    if len(traces) < 4:
+        return
+    nl = fit.nonlinear_parameter
+    hold = dict(fix)
+    if fit.structure == "quantization" and nl is not None:
+        hold[nl] = fit.params[nl]
+    free = [k for k in fit.params if k not in hold]
+    values = []
+    for i in range(len(traces)):
+        rest = traces[:i] + traces[i + 1:]
+        try:
+            part = fit_servo_model(rest, fit.structure, start=dict(fit.params), fix=hold, bounds=bounds, sigma=sigma)
+        except ServoscopeError:
+            return
+        values.append([part.params[k] for k in free])
+    v = np.asarray(values)
+    n = v.shape[0]
+    jack = np.sqrt((n - 1) / n * np.sum((v - v.mean(axis=0)) ** 2, axis=0))
+    for name, se in zip(free, jack):
+        if se > fit.stderr[name]:
+            fit.stderr[name] = float(se)
+            fit.ci95[name] = (fit.params[name] - _Z95 * se, fit.params[name] + _Z95 * se)
+
+
+def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dict[str, float],
+                   response: dict | None = None, fix: dict | None = None, bounds: dict | None = None
+                   ) -> dict[str, Any]:
+    """Fit the model's structure to the dwells alone and predict the step, and the reverse.
+
+    Returns
+    -------
+    dict
+        ``dwells_to_step``: ``{"fit_percent"}`` of the step predicted by the dwells' fit (its
+        rest angle the step's own, from the samples before the input arrived);
+        ``step_to_dwells``: ``{"J"}`` of the dwells predicted by the step's fit; ``verdict``.
+    """
+    dwells = [tr for tr in traces if tr.kind == "sine"]
+    steps = [tr for tr in traces if tr.kind == "step"]
+    out: dict[str, Any] = {"dwells_to_step": None, "step_to_dwells": None, "verdict": None}
+    if not (dwells and steps):
+        out["verdict"] = "not done: cross-validation needs both dwells and a step"
+        return out
+    start = dict(model.params)
+    problems = []
+    try:
+        from_dwells = fit_servo_model(dwells, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        step = steps[0]
+        predicted = simulate_trace(step, model.structure, from_dwells.params)
+        rest = float(np.mean((step.angle_rad - predicted)[step.time_s < step.t0_s + from_dwells.params["dead_time_s"]])
+                     ) if np.any(step.time_s < step.t0_s) else float(np.mean(step.angle_rad - predicted))
+        out["dwells_to_step"] = {"fit_percent": fit_percent(step.angle_rad, predicted + rest)}
+    except ServoscopeError as exc:
+        problems.append(f"dwells → step not done ({exc})")
+    try:
+        from_step = fit_servo_model(steps, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        if response:
+            out["step_to_dwells"] = {"J": dwell_cost(from_step.params, model.structure, dwells, response)}
+    except ServoscopeError as exc:
+        problems.append(f"step → dwells not done ({exc})")
+    out["verdict"] = _verdict(out, problems)
+    return out
+
+
+#: The step's fit (percent) a model must reach to be said to predict it.
+STEP_FIT_PREDICTS = 90.0
+
+
+def _verdict(cv: dict[str, Any], problems: list[str]) -> str:
+    parts = []
+    d2s, s2d = cv["dwells_to_step"], cv["step_to_dwells"]
+    if d2s is not None:
+        ok = d2s["fit_percent"] >= STEP_FIT_PREDICTS
+        parts.append(f"the dwells' model {'predicts' if ok else 'does not predict'} the step "
+                     f"(fit {d2s['fit_percent']:.1f} %)")
+    if s2d is not None and math.isfinite(s2d["J"]):
+        ok = s2d["J"] <= 100.0
+        parts.append(f"the step's model {'predicts' if ok else 'does not predict'} the dwells (J {s2d['J']:.3g})")
+    return "; ".join(parts + problems) or "not done"
