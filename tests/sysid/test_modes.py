@@ -28,6 +28,15 @@ def test_a_ringdown_is_found_within_its_interval():
     assert m.frequency_hz == pytest.approx(9.0, rel=1e-3) and m.damping_ratio == pytest.approx(z, rel=0.05)
     # Noise alone rings nothing.
     assert fit_damped_mode(t, 0.01 * rng.standard_normal(t.size), 0.0, noise=0.01) is None
+    # Nor a decay that does not ring (damping ratio 0.88, as a rigid blade's heave drift once read).
+    wn = 2 * math.pi * 13.4
+    decay = 1.2 * np.exp(-0.88 * wn * t) * np.cos(wn * math.sqrt(1 - 0.88**2) * t) + 0.001 * rng.standard_normal(t.size)
+    assert fit_damped_mode(t, decay, 0.0) is None
+
+
+def test_the_rigid_quick_campaign_at_full_size_rings_nothing(quick_result):
+    # 720×576, seed 3: its step's heave once gave a "mode" at 13.4 Hz with damping ratio 0.88.
+    assert quick_result.modes == []
 
 
 @pytest.mark.parametrize("codec", ["raw", "h264"])
