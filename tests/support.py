@@ -9,11 +9,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import math
+
 import av
 import numpy as np
 
 from servoscope.markers import kernels as K
 from servoscope.video.writer import rgb_to_yuv420p
+from servoscope.simulate.presets import get_preset
+from servoscope.simulate.servo import InputSignal, ServoModel
+from servoscope.sysid.servo_sim import ServoTrace
 
 #: The repository's root, its sources and the tests' own data.
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,3 +107,49 @@ def run_kernel(engine, i420, params, led, row_off=0, row_step=1):
     led_out = np.zeros(K.LED_NQ)
     K.track_frame(engine, y, u, v, row_off, row_step, params, led, out, led_out)
     return out, led_out
+
+
+# The time-domain servo models' tests (tests/sysid/test_servo_*.py): the twin's servo, simulated without rendering.
+SERVO = get_preset("quick").servo  #: the quick preset's servo (the paper's)
+_K, _WN, _ZETA, _TAU = SERVO.gain, SERVO.natural_frequency_rad_s, SERVO.damping_ratio, 0.085
+SERVO_LINEAR = {"gain": _K, "natural_frequency_rad_s": _WN, "damping_ratio": _ZETA, "dead_time_s": _TAU}
+#: Each structure: the twin's option and the fitted parameter's true value (the rate limit in the
+#: output's units: the twin limits the reference, in input units per second, so times K).
+SERVO_STRUCTURES = {"rate_limit": ({"rate_limit_per_s": 4.0}, "rate_limit_rad_s", 4.0 * _K),
+                    "backlash": ({"backlash": 0.004}, "backlash_rad", 0.004),
+                    "quantization": ({"input_quantization": 0.02}, "quantization_step", 0.02)}
+
+
+def servo_trace(kind, amplitude, frequency_hz, t, y, noise=3e-5, exposure_s=0.0, t0=0.3) -> ServoTrace:
+    """A test's trace for the time-domain fits (a dwell's steady window from 0.3 s after its start)."""
+    window = (t0 + 0.3, float(t[-1])) if kind == "sine" else None
+    return ServoTrace(f"{kind}_{frequency_hz}_{amplitude}", kind, amplitude, frequency_hz, t0, t, y, noise,
+                      exposure_s, window)
+
+
+def servo_campaign(servo: ServoModel, seed: int, fps: float = 100.0, noise: float = 3e-5):
+    """The quick preset's tests (4 frequencies at 2 amplitudes and a step) simulated by the twin, with noise.
+
+    Returns the traces and each dwell's measured (gain, phase_deg, coherence), by label.
+    """
+    rng = np.random.default_rng(seed)
+    traces, response = [], {}
+    for f in (1.0, 2.29, 5.24, 12.0):
+        for a in (0.05, 0.2):
+            t = np.arange(0.0, 0.3 + 0.3 + max(1.0, 2.0 / f), 1.0 / fps) + rng.uniform(0, 1.0 / fps)
+            y = servo.response(InputSignal("sine", a, f, 0.3), t) + noise * rng.standard_normal(t.size) + 0.02
+            tr = servo_trace("sine", a, f, t, y, noise)
+            traces.append(tr)
+    t = np.arange(0.0, 1.0, 1.0 / fps)
+    traces.append(servo_trace("step", 0.5, None, t, servo.response(InputSignal("step", 0.5, None, 0.3), t)
+                              + noise * rng.standard_normal(t.size) - 0.01, noise))
+    for tr in traces:
+        if tr.kind == "sine":
+            # The measured fundamental, by the same regression the model's goes through (a linear oracle).
+            lo, hi = tr.window_s
+            inside = (tr.time_s >= lo) & (tr.time_s <= hi)
+            w = 2 * math.pi * tr.frequency_hz * (tr.time_s[inside] - tr.t0_s)
+            a, b, _ = np.linalg.lstsq(np.column_stack([np.sin(w), np.cos(w), np.ones_like(w)]),
+                                      tr.angle_rad[inside], rcond=None)[0]
+            response[tr.label] = (math.hypot(a, b) / tr.amplitude, math.degrees(math.atan2(b, a)), 1.0)
+    return traces, response

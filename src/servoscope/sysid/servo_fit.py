@@ -255,14 +255,20 @@ def _x_bounds(problem: _Problem, bounds: dict[str, tuple[float, float]]) -> tupl
 
 
 def _solve(problem: _Problem, starts: list[dict[str, float]], bounds: dict[str, tuple[float, float]]):
-    """The best of least-squares runs from ``starts`` (each clipped into the bounds)."""
+    """The best of least-squares runs from the best three of ``starts`` (each clipped into the bounds)."""
     lo, hi = _x_bounds(problem, bounds)
-    best = None
+    points = []
     for start in starts:
         x0 = problem.x(start)
         margin = 1e-9 * (1.0 + np.abs(x0))
         x0 = np.where(np.isfinite(lo), np.maximum(x0, lo + margin), x0)
-        x0 = np.where(np.isfinite(hi), np.minimum(x0, hi - margin), x0)
+        points.append(np.where(np.isfinite(hi), np.minimum(x0, hi - margin), x0))
+    if len(points) > 3:
+        # A start's own cost says which are worth a descent (one simulation each, not hundreds).
+        points.sort(key=lambda x: float(np.sum(problem.residual(x) ** 2)))
+        points = points[:3]
+    best = None
+    for x0 in points:
         sol = least_squares(problem.residual, x0, bounds=(lo, hi), x_scale="jac", diff_step=1e-6, max_nfev=400)
         if best is None or sol.cost < best.cost:
             best = sol
