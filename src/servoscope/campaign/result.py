@@ -21,6 +21,7 @@ from ..markers.track import Track
 from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.linearity import AmplitudeCheck
+from ..sysid.heave import HeaveRow
 from ..sysid.modes import ModeFit
 from ..sysid.servo_select import ServoModelSelection
 from ..sysid.servo_sim import NONLINEAR_PARAMETER
@@ -129,10 +130,18 @@ class IdentificationResult:
         :func:`shared_t0_stderr`), added to the phase dead time's.
     modes : list of ModeFit
         The blade's structural modes seen in its heave after the step (see
-        :func:`servoscope.campaign.runner.blade_modes`); empty when none rings.
+        :func:`servoscope.campaign.blade.blade_modes`); empty when none rings.
     amplitude_checks : list of AmplitudeCheck
         Each frequency measured at several input amplitudes, its gains compared
         (:func:`~servoscope.sysid.gain_against_amplitude`); empty otherwise.
+    servo_model : ServoModelSelection or None
+        The time-domain models fitted to the whole traces (``identify(nonlinear=...)``,
+        :mod:`servoscope.campaign.joint`); None without.
+    predicted_step_fit_percent : float or None
+        The step's fit by the frequency-domain model, fitted without it (2nd order only).
+    heave_response : list of HeaveRow
+        Each dwell's heave at its input frequency (:func:`servoscope.campaign.blade.heave_response`);
+        empty when no dwell shows any (a rigid blade).
     """
 
     campaign: Campaign
@@ -149,6 +158,7 @@ class IdentificationResult:
     modes: list[ModeFit] = field(default_factory=list)
     servo_model: ServoModelSelection | None = None
     predicted_step_fit_percent: float | None = None
+    heave_response: list = field(default_factory=list)
 
     @property
     def transfer_function(self):
@@ -245,6 +255,7 @@ class IdentificationResult:
                 **({"gain_against_amplitude": [c.summary() for c in self.amplitude_checks]}
                    if self.amplitude_checks else {}),
                 **({"modes": [m.summary() for m in self.modes]} if self.modes else {}),
+                **({"heave_response": [r.summary() for r in self.heave_response]} if self.heave_response else {}),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
                                                         **self._step_fits()},
@@ -418,7 +429,8 @@ class IdentificationResult:
         predicted = None if data.get("step") is None else data["step"].get("predicted_fit_percent")
         return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
                    list(data.get("warnings", [])), exposure, float(shared), checks, modes, selection,
-                   predicted if selection is None else None)
+                   predicted if selection is None else None,
+                   [HeaveRow.from_summary(r) for r in data.get("heave_response", [])])
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

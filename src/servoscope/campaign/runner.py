@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..angle.pivot import axis_moved, heave_px, pivot_motion
+from ..angle.pivot import axis_moved
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
@@ -27,7 +27,7 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
-from ..sysid.modes import ModeFit, fit_damped_mode
+from .blade import blade_modes, heave_response
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
@@ -138,32 +138,6 @@ def led_coverage_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | 
     return (f"LED found in {found} of {len(need)} videos but not in {len(missing)}: {', '.join(missing)}; these have "
             "no input start, so no phase and no dead time from them (each video's own warning says why; check the "
             "LED colour, or give their t0_s in the manifest)")
-
-
-def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
-    """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
-
-    The heave is the markers' line's distance from the pitch axis
-    (:func:`servoscope.angle.heave_px`); the free motion starts when the servo has
-    settled (the step's measured settling time after t0, else its dead time and
-    0.3 s) and four of the model's time constants 1/(ζ·ωn) more: the servo's own
-    forced motion, 2 % at settling, biased the twin's 9 Hz mode by 0.03 %, 4 σ of its
-    fit. Its noise is the heave's frame-to-frame scatter before the input.
-    """
-    if step is None or track is None:
-        return []
-    t0_s = step.t0_s
-    pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
-    if pivot is None:
-        return []
-    heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
-    before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
-    noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
-    settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
-    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
-    settled += 4.0 / decay if decay > 0 else 0.2
-    mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
-    return [] if mode is None else [mode]
 
 
 def pivot_warning(campaign: Campaign, tracks: dict[str, Track]) -> str | None:
@@ -501,6 +475,7 @@ def identify(
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
     modes = blade_modes(step, tracks[step_label] if step_label else None, model)
+    heave = heave_response(campaign, tracks, fits, tracks[step_label] if step_label else None)
     for mode in modes:
         near = [t.label for t in campaign.sine_tests if t.frequency_hz
                 and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
@@ -533,4 +508,4 @@ def identify(
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)
     return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks, modes, selection, predicted)
+                                amplitude_checks, modes, selection, predicted, heave)

@@ -199,6 +199,13 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                   " ± ".join(format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)),
                   " ± ".join(format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr))]
                  for i, m in enumerate(result.modes)])
+    if result.heave_response:
+        # The blade's heave at each dwell's frequency: a second frequency response, beside the pitch's.
+        s.table(["dwell", "f (Hz)", "heave gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
+                 "amplitude (px)"],
+                [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
+                  *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
+                 for r in result.heave_response])
     if result.amplitude_checks:
         verdicts = "; ".join(f"{c.frequency_hz:.3g} Hz: {100 * c.change:+.2f} % from {c.amplitudes[0]:g} to "
                              f"{c.amplitudes[-1]:g} (p = {c.p_value:.2g}, {'linear' if c.linear else 'NOT linear'})"
@@ -242,13 +249,19 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         "Dwell trace",
     )
     s.text("Every dwell (click to enlarge):")
-    thumbs = []
-    for other, other_fit in result.sine_fits.items():
-        t = result.tracks[other]
-        fig = dwell_figure(t.time_s, t.angle_rad, t.valid, other_fit.model(t.time_s), other_fit.window_s,
-                           t0_s=fit_t0(result, other), title=f"{other}: {other_fit.frequency_hz:.3g} Hz")
-        thumbs.append((fig, f"{other}: amplitude {other_fit.amplitude:.4g} rad, fidelity {other_fit.fidelity:.4f}", f"trace_{other}"))
-    s.thumbnails(thumbs)
+    import matplotlib.pyplot as plt
+
+    # All open at once until the thumbnails encode (and close) them: a campaign of 28 dwells
+    # would make matplotlib warn of more than 20 open figures.
+    with plt.rc_context({"figure.max_open_warning": 0}):
+        thumbs = []
+        for other, other_fit in result.sine_fits.items():
+            t = result.tracks[other]
+            fig = dwell_figure(t.time_s, t.angle_rad, t.valid, other_fit.model(t.time_s), other_fit.window_s,
+                               t0_s=fit_t0(result, other), title=f"{other}: {other_fit.frequency_hz:.3g} Hz")
+            thumbs.append((fig, f"{other}: amplitude {other_fit.amplitude:.4g} rad, fidelity {other_fit.fidelity:.4f}",
+                           f"trace_{other}"))
+        s.thumbnails(thumbs)
     sections.append(s)
 
     if result.step is not None and result.step_label is not None:

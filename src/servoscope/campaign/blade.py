@@ -1,0 +1,84 @@
+"""The blade's other motions beside its pitch (issue 18): its structural mode, and its heave per dwell.
+
+Both read the heave, the markers' line's distance from the pitch axis
+(:func:`servoscope.angle.heave_px`): a rigid blade turning about its axis keeps it; a
+blade that flaps moves the line across itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..angle.pivot import heave_px, pivot_motion
+from ..markers.tracker import Track
+from ..sysid import SineFit
+from ..sysid.heave import HeaveRow, dwell_heave
+from ..sysid.modes import ModeFit, fit_damped_mode
+from .manifest import Campaign
+from .result import input_start
+
+__all__ = ["HEAVE_MIN_Z", "blade_modes", "heave_response"]
+
+#: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
+HEAVE_MIN_Z = 5.0
+
+
+def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
+    """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
+
+    The heave is the markers' line's distance from the pitch axis
+    (:func:`servoscope.angle.heave_px`); the free motion starts when the servo has
+    settled (the step's measured settling time after t0, else its dead time and
+    0.3 s) and four of the model's time constants 1/(ζ·ωn) more: the servo's own
+    forced motion, 2 % at settling, biased the twin's 9 Hz mode by 0.03 %, 4 σ of its
+    fit. Its noise is the heave's frame-to-frame scatter before the input.
+    """
+    if step is None or track is None:
+        return []
+    t0_s = step.t0_s
+    pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+    if pivot is None:
+        return []
+    heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+    before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
+    noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
+    settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
+    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
+    settled += 4.0 / decay if decay > 0 else 0.2
+    mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
+    return [] if mode is None else [mode]
+
+
+def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit],
+                   axis_track: Track | None) -> list[HeaveRow]:
+    """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
+
+    The pitch axis is found once, on the step's track (its swing is the largest), else on the
+    dwell that swings most: an axis found on a small swing is uncertain, and its error would
+    read as heave at the input frequency. A campaign whose dwells show no heave beyond
+    :data:`HEAVE_MIN_Z` standard errors (a rigid blade) gets none, so its result is as before.
+    """
+    candidates = [axis_track] if axis_track is not None else sorted(
+        (tracks[label] for label in fits), key=lambda tr: -float(np.nanmax(tr.angle_rad) - np.nanmin(tr.angle_rad)))
+    pivot = None
+    for track in candidates:
+        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+        if pivot is not None:
+            break
+    if pivot is None:
+        return []
+    rows = []
+    for test in campaign.sine_tests:
+        fit, track = fits.get(test.label), tracks.get(test.label)
+        t0 = None if track is None else input_start(test, track)
+        if fit is None or t0 is None:
+            continue
+        h = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+        row = dwell_heave(track.angle_time_s, h, test.frequency_hz, t0, test.amplitude, fit.window_s, test.label)
+        if row is not None:
+            rows.append(row)
+    if not any(r.amplitude_px >= HEAVE_MIN_Z * r.gain_stderr * abs(r.amplitude_px / r.gain) for r in rows if r.gain):
+        return []
+    return rows
