@@ -416,13 +416,16 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
               help="Hold a model parameter at a value (e.g. damping_ratio=0.8); repeatable.")
 @click.option("--bound", "bound_text", multiple=True, metavar="NAME=LOW:HIGH",
               help="Keep a model parameter within limits (e.g. natural_frequency_rad_s=20:80); repeatable.")
+@click.option("--tie", "tie_text", multiple=True, metavar="NAME=EXPR",
+              help="Compute a parameter from others in the time-domain fits, as lmfit's expr (e.g. "
+                   "rate_limit_rad_s=4*gain); needs --nonlinear; repeatable.")
 @click.option("--nonlinear", type=click.Choice(["none", "auto", "linear", "rate_limit", "backlash", "quantization",
                                                 "saturation"]), default="none", show_default=True,
               help="Also fit models to the dwells' and the step's whole traces: linear, one nonlinear structure beside "
                    "it, or auto (every structure, selected by BIC). none: the frequency-domain fit alone.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
              workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
-             bound_text: tuple[str, ...], nonlinear: str) -> None:
+             bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
@@ -432,9 +435,15 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
 
     order = _parse_order(order_text)
     fix, bounds = _parse_held(fix_text, bound_text)
+    ties = {}
+    for text in tie_text:
+        name, _, expression = text.partition("=")
+        if not name.strip() or not expression.strip():
+            raise ServoscopeError(f"--tie {text!r}: give NAME=EXPR, e.g. --tie rate_limit_rad_s=4*gain")
+        ties[name.strip()] = expression.strip()
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
     held = manifest.held_parameters(fix, bounds)
-    check_nonlinear(manifest, nonlinear, order, *held)
+    check_nonlinear(manifest, nonlinear, order, *held, {**manifest.model_ties, **ties})
     fr_fix, fr_bounds, _, _ = split_held(*held)
     check_held(order, "minimum_phase", fr_fix, fr_bounds)
     _check_out_dir(out_dir, manifest)
@@ -447,7 +456,7 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if failures:
         manifest = manifest.without(failures)
     result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
-                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear)
+                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear, ties=ties or None)
     paths = write_report(result, out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
@@ -569,7 +578,8 @@ def _print_servo_model(result, truth: dict | None) -> None:
     for name, value in sel.params.items():
         v, e = format_with_uncertainty(value, sel.stderr.get(name))
         lo, hi = sel.ci95[name]
-        params.add_row(name + (" (held)" if name in sel.fixed else ""), v, e, format_interval(lo, hi, sel.stderr[name]),
+        held = " (held)" if name in sel.fixed else f" (= {sel.tied[name]})" if name in sel.tied else ""
+        params.add_row(name + held, v, e, format_interval(lo, hi, sel.stderr[name]),
                        *((_fmt(true.get(name)),) if truth else ()))
     console = Console(highlight=False, width=112)
     console.print(table)

@@ -62,3 +62,20 @@ def test_bad_nonlinear_requests_are_one_line_and_write_nothing(quick_campaign, t
     assert "did you mean 'backlash_rad'" in run("--nonlinear", "backlash", "--fix", "backlash=0.1")
     assert "add --nonlinear backlash" in run("--fix", "backlash_rad=0.01")
     assert "use --order 2" in run("--nonlinear", "linear", "--order", "3")
+    assert "tied in the time-domain fits only" in run("--tie", "rate_limit_rad_s=4*gain")
+    assert "did you mean 'gain'" in run("--nonlinear", "linear", "--tie", "dead_time_s=0.4*gian")
+    assert "not an expression" in run("--nonlinear", "linear", "--tie", "dead_time_s=4*(gain")
+
+
+def test_manifest_model_tie(quick_campaign):
+    from servoscope.campaign import load_campaign
+    from servoscope.errors import ServoscopeError
+
+    # The videos are beside the original manifest: written there.
+    good = quick_campaign.parent / "tie.toml"
+    good.write_text(quick_campaign.read_text() + '\n[model]\ntie = {rate_limit_rad_s = "4*gain"}\n')
+    assert load_campaign(good).model_ties == {"rate_limit_rad_s": "4*gain"}
+    bad = quick_campaign.parent / "tie_bad.toml"
+    bad.write_text(quick_campaign.read_text() + "\n[model]\ntie = {rate_limit_rad_s = 4}\n")
+    with pytest.raises(ServoscopeError, match="model.tie.rate_limit_rad_s: must be an expression"):
+        load_campaign(bad)

@@ -114,3 +114,29 @@ def test_summary_round_trips_and_bad_names_are_refused():
         fit_servo_model(traces, "linear", fix={"damping_ratio": 0.9}, bounds={"damping_ratio": (0.1, 0.5)})
     with pytest.raises(ServoscopeError, match="unknown model structure"):
         fit_servo_model(traces, "hysteresis")
+
+
+def test_a_tied_parameter_follows_its_expression():
+    from servoscope.errors import ServoscopeError
+
+    traces, response = _campaign(ServoModel(PAPER.num, PAPER.den, dead_time_s=TAU, rate_limit_per_s=4.0), 0)
+    free = fit_servo_model(traces, "rate_limit", response=response)
+    tied = fit_servo_model(traces, "rate_limit", ties={"rate_limit_rad_s": "4*gain"}, response=response)
+    # The truth is tied so: the twin limits its set-point to 4 input units/s, the blade to 4·K rad/s.
+    assert tied.params["rate_limit_rad_s"] == pytest.approx(4 * tied.params["gain"], rel=1e-12)
+    assert tied.tied == {"rate_limit_rad_s": "4*gain"} and tied.n_free == free.n_free - 1
+    # Its error by the delta method: 4 times the gain's stated one (systematic part included).
+    assert tied.stderr["rate_limit_rad_s"] == pytest.approx(4 * tied.stderr["gain"], rel=1e-4)
+    for k, v in {**LINEAR, "rate_limit_rad_s": 4.0 * PAPER.gain}.items():
+        assert tied.ci95[k][0] <= v <= tied.ci95[k][1], (k, tied.ci95[k], v)
+    assert tied.params["rate_limit_rad_s"] == pytest.approx(4.0 * PAPER.gain, rel=2e-3)
+    assert tied.summary()["tied"] == {"rate_limit_rad_s": "4*gain"}
+    with pytest.raises(ServoscopeError, match="did you mean 'gain'"):
+        fit_servo_model(traces, "rate_limit", ties={"rate_limit_rad_s": "4*gian"})
+    with pytest.raises(ServoscopeError, match="cannot also be fixed"):
+        fit_servo_model(traces, "rate_limit", ties={"rate_limit_rad_s": "4*gain"}, fix={"rate_limit_rad_s": 1.0})
+    with pytest.raises(ServoscopeError, match="tied itself"):
+        fit_servo_model(traces, "rate_limit", ties={"rate_limit_rad_s": "4*gain", "gain": "0.23*damping_ratio/0.65",
+                                                    "damping_ratio": "0.65"})
+    with pytest.raises(ServoscopeError, match="not an expression"):
+        fit_servo_model(traces, "rate_limit", ties={"rate_limit_rad_s": "4*(gain"})

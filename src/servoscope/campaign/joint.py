@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import ServoscopeError
 from ..markers.tracker import Track
-from ..sysid.servo_fit import check_servo_held, fit_percent
+from ..sysid.servo_fit import check_servo_held, expression_names, fit_percent
 from ..sysid.servo_select import ServoModelSelection, select_servo_model
 from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 from .manifest import Campaign
@@ -44,7 +44,7 @@ def structures_of(nonlinear: str) -> tuple[str, ...]:
 
 
 def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, float],
-                    bounds: dict[str, tuple[float, float]]) -> None:
+                    bounds: dict[str, tuple[float, float]], ties: dict[str, str] | None = None) -> None:
     """Refuse, before any tracking, a time-domain fit the campaign cannot support.
 
     Raises
@@ -52,26 +52,35 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
     ServoscopeError
         An unknown structure; a nonlinear parameter held without its structure; a nonlinear
         structure without a step test or with fewer dwells than parameters; a model order
-        other than the 2nd-order one the time-domain models are built on.
+        other than the 2nd-order one the time-domain models are built on; a tie without a
+        time-domain fit, or one naming an unknown parameter.
     """
+    ties = dict(ties or {})
     if nonlinear not in NONLINEAR_CHOICES:
         raise ServoscopeError(f"--nonlinear {nonlinear!r}: choose from {', '.join(NONLINEAR_CHOICES)}")
-    own = [k for k in [*fix, *bounds] if k in NONLINEAR_PARAMETER.values()]
+    own = [k for k in [*fix, *bounds, *ties] if k in NONLINEAR_PARAMETER.values()]
+    if nonlinear == "none" and ties:
+        raise ServoscopeError(f"tie {next(iter(ties))} = {next(iter(ties.values()))!r}: parameters are tied in the "
+                              "time-domain fits only; add --nonlinear linear (or a structure, or auto)")
     if nonlinear == "none":
         if own:
             raise ServoscopeError(f"{own[0]} belongs to a nonlinear model: add --nonlinear "
                                   f"{next(s for s, p in NONLINEAR_PARAMETER.items() if p == own[0])} (or auto)")
         return
     tried = structures_of(nonlinear)
-    for name in [*fix, *bounds]:
-        if name not in LINEAR_PARAMETERS and name not in NONLINEAR_PARAMETER.values():
-            check_servo_held(tried[-1], {name: 0.0}, None)  # one line, with a did-you-mean
-    for name in own:
-        if not any(NONLINEAR_PARAMETER.get(s) == name for s in tried):
-            raise ServoscopeError(f"{name} belongs to a structure --nonlinear {nonlinear} does not fit")
+    known = {*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER)}
+    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
+        if name not in known:
+            import difflib
+
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            raise ServoscopeError(f"no model of --nonlinear {nonlinear} has a parameter {name!r}"
+                                  + (f" (did you mean {close[0]!r}?)" if close else "")
+                                  + f"; the parameters: {', '.join(sorted(known))}")
     for s in tried:
-        check_servo_held(s, {k: v for k, v in fix.items() if k in LINEAR_PARAMETERS or k == NONLINEAR_PARAMETER.get(s)},
-                         {k: v for k, v in bounds.items() if k in LINEAR_PARAMETERS or k == NONLINEAR_PARAMETER.get(s)})
+        mine = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(s)}
+        check_servo_held(s, {k: v for k, v in fix.items() if k in mine}, {k: v for k, v in bounds.items() if k in mine},
+                         {k: v for k, v in ties.items() if k in mine and expression_names(v) <= mine})
     if tuple(order) != (0, 2):
         raise ServoscopeError(f"--nonlinear {nonlinear}: the time-domain models are 2nd-order with a dead time; "
                               f"use --order 2 (not {order})")
@@ -114,7 +123,7 @@ def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str
 def servo_model(campaign: Campaign, tracks: dict[str, Track], windows: dict[str, tuple[float, float]],
                 response: dict[str, tuple[float, float, float]], start: dict[str, float] | None, *,
                 nonlinear: str, exposure_s: float, t0_stderr_s: float, fix: dict[str, float],
-                bounds: dict[str, tuple[float, float]]) -> ServoModelSelection:
+                bounds: dict[str, tuple[float, float]], ties: dict[str, str] | None = None) -> ServoModelSelection:
     """Fit and select the time-domain models ``nonlinear`` asks for (see :func:`check_nonlinear`).
 
     Parameters
@@ -134,12 +143,14 @@ def servo_model(campaign: Campaign, tracks: dict[str, Track], windows: dict[str,
         The input starts' error, added to the dead time's.
     fix, bounds : dict
         Held parameters, linear and nonlinear.
+    ties : dict of name → expression, optional
+        Parameters computed from the others (:func:`~servoscope.sysid.servo_fit.fit_servo_model`).
     """
     traces = servo_traces(campaign, tracks, windows, exposure_s)
     if not any(tr.kind == "sine" for tr in traces) and not any(tr.kind == "step" for tr in traces):
         raise ServoscopeError(f"{campaign.path}: no test has a known input start and enough valid frames for a "
                               "time-domain fit")
-    return select_servo_model(traces, structures_of(nonlinear), start=start, fix=fix, bounds=bounds,
+    return select_servo_model(traces, structures_of(nonlinear), start=start, fix=fix, bounds=bounds, ties=ties,
                               response=response, t0_stderr_s=t0_stderr_s)
 
 

@@ -26,7 +26,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model"}
-_MODEL_KEYS = {"fix", "bound"}
+_MODEL_KEYS = {"fix", "bound", "tie"}
 _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
 _MARKER_KEYS = {"lead", "trail", "led", "reference"}
 _INPUT_KEYS = {"units"}
@@ -97,6 +97,9 @@ class Campaign:
     model_fix, model_bounds : dict
         Model parameters held at a value or within limits (``[model] fix =
         {damping_ratio = 0.8}``, ``bound = {natural_frequency_rad_s = [20, 80]}``).
+    model_ties : dict of name → expression
+        Parameters computed from others in the time-domain fits (``[model] tie =
+        {rate_limit_rad_s = "4*gain"}``).
     """
 
     path: Path
@@ -116,6 +119,7 @@ class Campaign:
     reference: tuple[str, str] | None = None
     model_fix: dict[str, float] = field(default_factory=dict)
     model_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    model_ties: dict[str, str] = field(default_factory=dict)
 
     def held_parameters(self, fix: dict[str, float] | None = None,
                         bounds: dict[str, tuple[float, float]] | None = None
@@ -352,7 +356,13 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
             model_bounds[name] = (float(value[0]), float(value[1]))
         else:
             problems.add(f"model.bound.{name}", f"must be [low, high] with low < high, got {value!r}")
-    for key in ("fix", "bound"):
+    model_ties: dict[str, str] = {}
+    for name, value in (model_t.get("tie") or {}).items() if isinstance(model_t.get("tie", {}), dict) else ():
+        if isinstance(value, str) and value.strip():
+            model_ties[name] = value
+        else:
+            problems.add(f"model.tie.{name}", f"must be an expression in quotes, e.g. \"4*gain\", got {value!r}")
+    for key in ("fix", "bound", "tie"):
         if key in model_t and not isinstance(model_t[key], dict):
             problems.add(f"model.{key}", "must be a table: {name = value, …}")
 
@@ -491,4 +501,5 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         reference=reference,
         model_fix=model_fix,
         model_bounds=model_bounds,
+        model_ties=model_ties,
     )

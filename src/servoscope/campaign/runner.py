@@ -303,6 +303,7 @@ def identify(
     fix: dict[str, float] | None = None,
     bounds: dict[str, tuple[float, float]] | None = None,
     nonlinear: str = "none",
+    ties: dict[str, str] | None = None,
     **track_options,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -334,6 +335,9 @@ def identify(
         (:mod:`servoscope.campaign.joint`): "linear" the linear model alone, a structure's name
         that structure beside it, "auto" every structure, selected by BIC. "none": the
         frequency-domain fit alone.
+    ties : dict of name → expression, optional
+        Parameters computed from others in the time-domain fits (with the manifest's
+        ``[model] tie``), e.g. ``{"rate_limit_rad_s": "4*gain"}``.
     **track_options
         Passed to :func:`track_campaign` when ``tracks`` is not given
         (``workers``, ``scheduler``, ``cache_dir``, ``force``, ``on_done``).
@@ -354,7 +358,8 @@ def identify(
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
     held_fix, held_bounds = campaign.held_parameters(fix, bounds)
-    check_nonlinear(campaign, nonlinear, order, held_fix, held_bounds)
+    held_ties = {**campaign.model_ties, **(ties or {})}
+    check_nonlinear(campaign, nonlinear, order, held_fix, held_bounds, held_ties)
     if tracks is None:
         failures: dict[str, str] = {}
         tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress, **track_options)
@@ -502,7 +507,8 @@ def identify(
             campaign, tracks, {label: f.window_s for label, f in fits.items()},
             {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
             fitted if tuple(order) == (0, 2) and all(np.isfinite(list(fitted.values()))) else None,
-            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds)
+            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
+            ties=held_ties)
         warnings.extend(w for w in selection.selected.warnings if w not in warnings)
     predicted = None
     if step_label is not None and order == (0, 2):

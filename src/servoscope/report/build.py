@@ -358,7 +358,8 @@ def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportS
     for name, value in sel.params.items():
         v, e = format_with_uncertainty(value, sel.stderr.get(name))
         lo, hi = sel.ci95[name]
-        rows.append([PARAM_LABELS.get(name, name) + (" (held fixed)" if name in sel.fixed else ""), v, e,
+        held = " (held fixed)" if name in sel.fixed else f" (tied: {sel.tied[name]})" if name in sel.tied else ""
+        rows.append([PARAM_LABELS.get(name, name) + held, v, e,
                      format_interval(lo, hi, sel.stderr[name])])
     s.table([f"{sel.structure} model", "value", "± s.e.", "95 % interval"], rows)
     s.text(f"Cross-validation: {selection.cross_validation.get('verdict')}.")

@@ -45,7 +45,7 @@ from ._tf_metrics import cifer_cost
 from .hac import hac_covariance
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 
-__all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost", "fit_percent", "fit_servo_model",
+__all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost", "expression_names", "fit_percent", "fit_servo_model",
            "linear_starts", "lag1", "measured_noise", "trace_group"]
 
 #: Systematic uncertainty of the linear part from whole traces, added to the fit's: relative for
@@ -72,25 +72,65 @@ def fit_percent(measured: NDArray[np.float64], predicted: NDArray[np.float64]) -
     return 100.0 * (1.0 - float(np.linalg.norm(y - np.asarray(predicted, dtype=float))) / spread)
 
 
+def _evaluate(expression: str, values: dict[str, float]) -> float:
+    """An lmfit-style constraint expression's value (asteval: arithmetic and math functions only)."""
+    from asteval import Interpreter
+
+    interp = Interpreter(minimal=True, use_numpy=False)
+    interp.symtable.update(values)
+    value = interp.eval(expression, show_errors=False, raise_errors=False)
+    if interp.error or value is None:
+        message = interp.error[0].get_error()[1].strip().splitlines()[-1] if interp.error else "no value"
+        raise ServoscopeError(f"tie {expression!r}: {message}")
+    return float(value)
+
+
+def expression_names(expression: str) -> set[str]:
+    """The parameter names an expression uses (asteval's own functions and constants left out)."""
+    from asteval import Interpreter, get_ast_names
+
+    interp = Interpreter(minimal=True, use_numpy=False)
+    try:
+        tree = interp.parse(expression)
+    except SyntaxError as exc:
+        raise ServoscopeError(f"tie {expression!r}: not an expression ({exc.msg or 'syntax error'})") from None
+    if tree is None:
+        raise ServoscopeError(f"tie {expression!r}: not an expression")
+    return {n for n in get_ast_names(tree) if n not in interp.symtable}
+
+
 def check_servo_held(structure: str, fix: dict[str, float] | None,
-                     bounds: dict[str, tuple[float, float]] | None) -> None:
-    """Raise ServoscopeError for a held parameter the structure does not have, or bounds that exclude a fix."""
+                     bounds: dict[str, tuple[float, float]] | None, ties: dict[str, str] | None = None) -> None:
+    """Raise ServoscopeError for a held parameter the structure does not have, bounds that exclude a fix, or a tie
+    that names an unknown parameter, another tied one, or a parameter also fixed or bounded."""
     names = set(LINEAR_PARAMETERS)
     if structure in NONLINEAR_PARAMETER:
         names.add(NONLINEAR_PARAMETER[structure])
-    for name in [*(fix or {}), *(bounds or {})]:
+    for name, expression in (ties or {}).items():
+        for used in expression_names(expression):
+            if used not in names:
+                raise ServoscopeError(f"tie {name} = {expression!r}: {_unknown(structure, used, names)}")
+            if used in (ties or {}):
+                raise ServoscopeError(f"tie {name} = {expression!r}: {used} is tied itself; tie to free or fixed "
+                                      "parameters only")
+        if name in (fix or {}) or name in (bounds or {}):
+            raise ServoscopeError(f"{name} is tied ({expression!r}): it cannot also be fixed or bounded")
+    for name in [*(fix or {}), *(bounds or {}), *(ties or {})]:
         if name not in names:
-            import difflib
-
-            close = difflib.get_close_matches(name, sorted(names), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ServoscopeError(f"the {structure} model has no parameter {name!r}{hint}; "
-                                  f"its parameters: {', '.join(sorted(names))}")
+            raise ServoscopeError(_unknown(structure, name, names))
     for name, (lo, hi) in (bounds or {}).items():
         if not lo < hi:
             raise ServoscopeError(f"bound on {name}: the lower limit {lo} must be below the upper {hi}")
         if name in (fix or {}) and not lo <= fix[name] <= hi:
             raise ServoscopeError(f"{name} is fixed at {fix[name]}, outside its bounds [{lo}, {hi}]")
+
+
+def _unknown(structure: str, name: str, names: set[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, sorted(names), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"the {structure} model has no parameter {name!r}{hint}; its parameters: {', '.join(sorted(names))}"
 
 
 @dataclass
@@ -106,6 +146,8 @@ class ServoModelFit:
     ci95 : dict of name → (lo, hi)
     fixed : tuple of str
         The parameters held fixed.
+    tied : dict of name → expression
+        Parameters computed from others (lmfit's ``expr``), their errors by the delta method.
     chi2 : float
         The cost, in units of each data set's noise.
     n_samples, n_free : int
@@ -142,6 +184,7 @@ class ServoModelFit:
     dwell_fit_percent: float | None = None
     traces: list[ServoTrace] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
+    tied: dict[str, str] = field(default_factory=dict)
 
     def predict(self, trace: ServoTrace, time_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """The model's angle for ``trace``'s input, on its rest angle when it was fitted (else 0)."""
@@ -156,7 +199,7 @@ class ServoModelFit:
         """Plain types: structure, parameters, errors, intervals, costs and fits."""
         return jsonable({
             "structure": self.structure, **self.params, "stderr": dict(self.stderr),
-            "ci95": {k: list(v) for k, v in self.ci95.items()}, "fixed": list(self.fixed),
+            "ci95": {k: list(v) for k, v in self.ci95.items()}, "fixed": list(self.fixed), "tied": dict(self.tied),
             "chi2": self.chi2, "n_samples": self.n_samples, "n_free": self.n_free, "aic": self.aic, "bic": self.bic,
             "J": self.J, "step_fit_percent": self.step_fit_percent, "dwell_fit_percent": self.dwell_fit_percent,
             "noise_rad": dict(self.sigma), "rest_angle_rad": dict(self.offsets), "warnings": list(self.warnings)})
@@ -176,7 +219,7 @@ class ServoModelFit:
                    {k: num(v) for k, v in (data.get("rest_angle_rad") or {}).items()},
                    {k: num(v) for k, v in data["noise_rad"].items()}, num(data["aic"]), num(data["bic"]),
                    num(data["J"]), data["step_fit_percent"], data["dwell_fit_percent"],
-                   warnings=list(data["warnings"]))
+                   warnings=list(data["warnings"]), tied=dict(data.get("tied") or {}))
 
     def to_pandas(self) -> Any:
         """One row per parameter: value, stderr, 95 % interval, held."""
@@ -217,14 +260,17 @@ class _Problem:
     """The residual of one structure over the traces, with some parameters held."""
 
     def __init__(self, traces: list[ServoTrace], structure: str, values: dict[str, float], free: list[str],
-                 sigma: dict[str, float]):
+                 sigma: dict[str, float], ties: dict[str, str] | None = None):
         self.traces, self.structure, self.values, self.free = traces, structure, dict(values), free
+        self.ties = dict(ties or {})
         self.weight = [1.0 / sigma[trace_group(tr)] for tr in traces]
 
     def params(self, x: NDArray[np.float64]) -> dict[str, float]:
         p = dict(self.values)
         for name, v in zip(self.free, x):
             p[name] = math.exp(v) if name in _POSITIVE else float(v)
+        for name, expression in self.ties.items():
+            p[name] = _evaluate(expression, p)
         return p
 
     def x(self, params: dict[str, float]) -> NDArray[np.float64]:
@@ -330,14 +376,14 @@ def _nonlinear_starts(traces: list[ServoTrace], structure: str, gain: float) -> 
     return [0.3 * slew, 0.7 * slew, 1.5 * slew, 1e3 * slew], (1e-3 * slew, 1e4 * slew)
 
 
-def _quantization_profile(traces, starts, free, sigma, bounds) -> tuple[list[float], list[Any], float]:
+def _quantization_profile(traces, starts, free, sigma, bounds, ties) -> tuple[list[float], list[Any], float]:
     """The best fit at each quantization step on a log grid (each from the last), refined around the best."""
     lo, hi = bounds["quantization_step"]
     grid = list(np.geomspace(lo, hi, 40))
     sols: list[Any] = []
     values = dict(starts[0])
     for q in grid:
-        problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma)
+        problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma, ties)
         sols.append(_solve(problem, starts, bounds))
         starts = [{**values, **problem.params(sols[-1].x)}]
     # The profile has several dips (a step and its half make alike staircases): refine around the three best.
@@ -346,7 +392,7 @@ def _quantization_profile(traces, starts, free, sigma, bounds) -> tuple[list[flo
         best = {**values, **dict(zip(free, (math.exp(v) if n in _POSITIVE else float(v)
                                             for n, v in zip(free, sols[k].x))))}
         for q in np.geomspace(coarse[max(k - 1, 0)], coarse[min(k + 1, len(coarse) - 1)], 9)[1:-1]:
-            problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma)
+            problem = _Problem(traces, "quantization", {**values, "quantization_step": q}, free, sigma, ties)
             sols.append(_solve(problem, [best], bounds))
             grid.append(float(q))
     return grid, sols, float(grid[int(np.argmin([s.cost for s in sols]))])
@@ -357,7 +403,7 @@ def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
                     fix: dict[str, float] | None = None, bounds: dict[str, tuple[float, float]] | None = None,
                     sigma: dict[str, float] | None = None,
                     response: dict[str, tuple[float, float, float]] | None = None,
-                    t0_stderr_s: float = 0.0) -> ServoModelFit:
+                    t0_stderr_s: float = 0.0, ties: dict[str, str] | None = None) -> ServoModelFit:
     """Fit one block structure to whole traces (see the module's description).
 
     Parameters
@@ -380,6 +426,10 @@ def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
         The dwells' measured (gain, phase_deg, coherence) by label, for CIFER's J.
     t0_stderr_s : float
         The input starts' standard error, added to the dead time's.
+    ties : dict of name → expression, optional
+        Parameters computed from the others, as lmfit's ``expr``: ``{"rate_limit_rad_s":
+        "4*gain"}`` (arithmetic and math functions, evaluated by asteval; an expression
+        may use free and fixed parameters, not another tied one).
 
     Returns
     -------
@@ -394,34 +444,34 @@ def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
         raise ServoscopeError(f"unknown model structure {structure!r} (choose from {', '.join(STRUCTURES)})")
     if not traces:
         raise ServoscopeError("a time-domain fit needs at least one test")
-    fix, bounds = dict(fix or {}), dict(bounds or {})
-    check_servo_held(structure, fix, bounds)
+    fix, bounds, ties = dict(fix or {}), dict(bounds or {}), dict(ties or {})
+    check_servo_held(structure, fix, bounds, ties)
     names = list(LINEAR_PARAMETERS) + ([NONLINEAR_PARAMETER[structure]] if structure in NONLINEAR_PARAMETER else [])
     sigma = sigma or measured_noise(traces)
     starts = linear_starts(traces, sigma) if start is None else [start] if isinstance(start, dict) else list(start)
     starts = [{**s, **fix} for s in starts]
     values = {**{k: float(starts[0][k]) for k in LINEAR_PARAMETERS}, **fix}
     nl = NONLINEAR_PARAMETER.get(structure)
-    if nl is not None and nl not in bounds:
+    if nl is not None and nl not in bounds and nl not in ties:
         bounds[nl] = _nonlinear_starts(traces, structure, values["gain"])[1]
-    free = [n for n in names if n not in fix]
+    free = [n for n in names if n not in fix and n not in ties]
     if sum(tr.time_s.size for tr in traces) <= len(free) + len(traces):
         raise ServoscopeError(f"{sum(tr.time_s.size for tr in traces)} samples cannot fit {len(free)} parameters "
                               f"and {len(traces)} rest angles")
     profile = None
-    if structure == "quantization" and nl not in fix:
+    if structure == "quantization" and nl in free:
         free.remove(nl)
-        grid, sols, q = _quantization_profile(traces, starts, free, sigma, bounds)
+        grid, sols, q = _quantization_profile(traces, starts, free, sigma, bounds, ties)
         profile = (grid, [2.0 * s.cost for s in sols])
         values[nl] = q
         sol = sols[int(np.argmin(profile[1]))]
     else:
-        problem = _Problem(traces, structure, values, free, sigma)
-        if nl is not None and nl not in fix:
+        problem = _Problem(traces, structure, values, free, sigma, ties)
+        if nl in free:
             starts = [s if nl in s else {**s, nl: v} for s in starts
                       for v in _nonlinear_starts(traces, structure, s["gain"])[0]]
         sol = _solve(problem, starts, bounds)
-    problem = _Problem(traces, structure, values, free, sigma)
+    problem = _Problem(traces, structure, values, free, sigma, ties)
     return _finish(problem, sol, structure, names, fix, bounds, profile, response, t0_stderr_s, sigma)
 
 
@@ -486,6 +536,24 @@ def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: 
             f = math.exp(min(_Z95 * stderr[name] / params[name], 50.0))
             ci95[name] = (params[name] / f, params[name] * f)
     nl = NONLINEAR_PARAMETER.get(structure)
+    if problem.ties and problem.free:
+        # A tied parameter's error by the delta method, in the free parameters' natural units: their
+        # covariance (the log scale's carried over) plus each one's systematic part, so a tie
+        # promises no more than what it is computed from.
+        scale = np.array([params[n] if n in _POSITIVE else 1.0 for n in problem.free])
+        c_nat = cov * np.outer(scale, scale)
+        extra = {n: (stderr[n] ** 2 - c_nat[i, i]) for i, n in enumerate(problem.free)}
+        c_nat = c_nat + np.diag([max(extra[n], 0.0) for n in problem.free])
+        for name, expression in problem.ties.items():
+            grad = np.empty(len(problem.free))
+            for i, free_name in enumerate(problem.free):
+                h = 1e-6 * max(1.0, abs(params[free_name]))
+                up, down = dict(params), dict(params)
+                up[free_name] += h
+                down[free_name] -= h
+                grad[i] = (_evaluate(expression, up) - _evaluate(expression, down)) / (2.0 * h)
+            stderr[name] = math.sqrt(max(float(grad @ c_nat @ grad), 0.0))
+            ci95[name] = (params[name] - _Z95 * stderr[name], params[name] + _Z95 * stderr[name])
     if profile is not None:
         order = np.argsort(profile[0])
         grid, cost = np.asarray(profile[0])[order], np.asarray(profile[1])[order]
@@ -509,8 +577,8 @@ def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: 
             warnings.append(f"{structure} model: {name} ended at its limit ({params[name]:.4g}); its interval "
                             "is not a measurement")
     fit = ServoModelFit(structure, params, stderr, ci95, tuple(k for k in names if k in fix), chi2, n,
-                        len(names) - len(fix) + len(problem.traces), problem.offsets(params), dict(sigma),
-                        traces=list(problem.traces), warnings=warnings)
+                        len(names) - len(fix) - len(problem.ties) + len(problem.traces), problem.offsets(params),
+                        dict(sigma), traces=list(problem.traces), warnings=warnings, tied=dict(problem.ties))
     step = [tr for tr in problem.traces if tr.kind == "step"]
     dwells = [tr for tr in problem.traces if tr.kind == "sine"]
     if step:

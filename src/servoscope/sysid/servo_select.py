@@ -22,8 +22,8 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import ServoscopeError
 from ..results import import_pandas, jsonable
-from .servo_fit import (ServoModelFit, check_servo_held, dwell_cost, fit_percent, fit_servo_model, lag1,
-                        linear_starts, measured_noise, trace_group)
+from .servo_fit import (ServoModelFit, check_servo_held, dwell_cost, expression_names, fit_percent, fit_servo_model,
+                        lag1, linear_starts, measured_noise, trace_group)
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
 
 __all__ = ["BIC_MARGIN", "STEP_FIT_PREDICTS", "ServoModelSelection", "cross_validate", "select_servo_model"]
@@ -97,6 +97,7 @@ def _information(fits: list[ServoModelFit]) -> float:
 
 def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | list[str], *,
                        start: dict[str, float] | None = None, fix: dict[str, float] | None = None,
+                       ties: dict[str, str] | None = None,
                        bounds: dict[str, tuple[float, float]] | None = None,
                        response: dict[str, tuple[float, float, float]] | None = None,
                        t0_stderr_s: float = 0.0) -> ServoModelSelection:
@@ -107,19 +108,19 @@ def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | l
     traces : list of ServoTrace
     structures : sequence of str
         Nonlinear structures to try beside the linear model (which is always tried).
-    start, fix, bounds, response, t0_stderr_s
+    start, fix, bounds, response, t0_stderr_s, ties
         As for :func:`fit_servo_model`; a held parameter a structure does not have is
-        refused (a nonlinear one is held only in its own structure).
+        refused (a nonlinear one is held, or tied, only in its own structure).
 
     Returns
     -------
     ServoModelSelection
     """
     with threadpool_limits(1):  # see pyproject.toml: small matrices, many of them
-        return _select(traces, structures, start, fix, bounds, response, t0_stderr_s)
+        return _select(traces, structures, start, fix, bounds, response, t0_stderr_s, dict(ties or {}))
 
 
-def _select(traces, structures, start, fix, bounds, response, t0_stderr_s) -> ServoModelSelection:
+def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties) -> ServoModelSelection:
     """The work of :func:`select_servo_model` (see there).
 
     Long because it is the selection's order written out: a first fit of each structure, the
@@ -130,20 +131,23 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s) -> Se
     fix, bounds = dict(fix or {}), dict(bounds or {})
 
     def held(structure: str, d: dict) -> dict:
+        # A structure's own holds (a tie also needs its expression's names to be the structure's).
         own = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(structure)}
-        return {k: v for k, v in d.items() if k in own}
+        return {k: v for k, v in d.items() if k in own and (not isinstance(v, str) or expression_names(v) <= own)}
 
     known = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER}
-    for name in [*fix, *bounds]:
+    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
         if name not in known:
             check_servo_held(tried[-1], {name: 0.0}, None)  # its did-you-mean
     sigma = measured_noise(traces)
     # The linear model from the given start (the frequency-domain fit's) and from a coarse grid, so
     # that a frequency-domain fit gone wrong (a strongly nonlinear servo) does not decide the rest.
     starts = ([start] if start else []) + linear_starts(traces, sigma)
-    first = [fit_servo_model(traces, "linear", start=starts, fix=held("linear", fix), bounds=held("linear", bounds))]
+    first = [fit_servo_model(traces, "linear", start=starts, fix=held("linear", fix), bounds=held("linear", bounds),
+                             ties=held("linear", ties))]
     lin = {k: first[0].params[k] for k in LINEAR_PARAMETERS}
-    first += [fit_servo_model(traces, s, start=lin, fix=held(s, fix), bounds=held(s, bounds)) for s in tried[1:]]
+    first += [fit_servo_model(traces, s, start=lin, fix=held(s, fix), bounds=held(s, bounds), ties=held(s, ties))
+              for s in tried[1:]]
     best = min(first, key=lambda f: f.chi2)
     for group in sigma:
         r = np.concatenate([tr.angle_rad - best.predict(tr) for tr in best.traces if trace_group(tr) == group])
@@ -162,7 +166,8 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s) -> Se
         warm = {**f.params} if s != "quantization" else {k: f.params[k] for k in LINEAR_PARAMETERS}
         if nl is not None and s != "quantization":
             warm[nl] = f.params[nl]
-        fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), sigma=sigma,
+        fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), ties=held(s, ties),
+                                    sigma=sigma,
                                     response=response, t0_stderr_s=t0_stderr_s))
     scale = _information(fits)
     linear = fits[0]
@@ -192,12 +197,13 @@ def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, fl
     hold = dict(fix)
     if fit.structure == "quantization" and nl is not None:
         hold[nl] = fit.params[nl]
-    free = [k for k in fit.params if k not in hold]
+    free = [k for k in fit.params if k not in hold and k not in fit.tied]
     values = []
     for i in range(len(traces)):
         rest = traces[:i] + traces[i + 1:]
         try:
-            part = fit_servo_model(rest, fit.structure, start=dict(fit.params), fix=hold, bounds=bounds, sigma=sigma)
+            part = fit_servo_model(rest, fit.structure, start=dict(fit.params), fix=hold, bounds=bounds, sigma=sigma,
+                                   ties=fit.tied)
         except ServoscopeError:
             return
         values.append([part.params[k] for k in free])
@@ -231,7 +237,8 @@ def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dic
     start = dict(model.params)
     problems = []
     try:
-        from_dwells = fit_servo_model(dwells, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        from_dwells = fit_servo_model(dwells, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma,
+                                      ties=model.tied)
         step = steps[0]
         predicted = simulate_trace(step, model.structure, from_dwells.params)
         rest = float(np.mean((step.angle_rad - predicted)[step.time_s < step.t0_s + from_dwells.params["dead_time_s"]])
@@ -240,7 +247,8 @@ def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dic
     except ServoscopeError as exc:
         problems.append(f"dwells → step not done ({exc})")
     try:
-        from_step = fit_servo_model(steps, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma)
+        from_step = fit_servo_model(steps, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma,
+                                    ties=model.tied)
         if response:
             out["step_to_dwells"] = {"J": dwell_cost(from_step.params, model.structure, dwells, response)}
     except ServoscopeError as exc:
