@@ -6,8 +6,6 @@ Oracle: the twin's truth (its servo's backlash and linear part).
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 from dataclasses import replace
 
@@ -44,18 +42,31 @@ def test_backlash_found_in_rendered_footage(tmp_path):
     assert model["fixed"] == []
     html = out["report"].read_text()
     assert "One model for the sines and the step" in html and "Measured and modelled traces" in html
+    assert "Describing function" in html and "Candidates against one trace" in html
+    # The describing function the report draws is the model's: at 5.24 Hz it meets the measured gains.
+    fit = res.servo_model.selected
+    fr = res.frequency_response
+    for label, f, g, se in zip(fr.labels, fr.frequency_hz, fr.gain, fr.gain_stderr):
+        if abs(f - 5.24) < 0.01:
+            a = next(t.amplitude for t in res.campaign.tests if t.label == label)
+            assert abs(abs(fit.describing_function(f, [a])[0]) - g) < max(4 * se, 0.005 * g), (label, g, se)
     again = IdentificationResult.load(tmp_path / "out")
     assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)
 
 
-def test_bad_nonlinear_requests_are_one_line_and_write_nothing(quick_campaign, tmp_path):
+def test_bad_nonlinear_requests_are_one_line_and_write_nothing(quick_campaign, tmp_path, capsys):
+    from servoscope.cli import main
+
     def run(*args):
+        # In-process (the command's own entry point, its error handling included): no interpreter to start.
         out = tmp_path / f"o{len(list(tmp_path.iterdir()))}"
-        p = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(quick_campaign), "--out", str(out),
-                            *args], capture_output=True, text=True, timeout=120)
-        assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+        with pytest.raises(SystemExit) as exited:
+            main(["identify", str(quick_campaign), "--out", str(out), *args])
+        printed = capsys.readouterr()
+        assert exited.value.code == 2 and printed.out == "", printed
+        assert len(printed.err.strip().splitlines()) == 1 and printed.err.startswith("servoscope: error: "), printed.err
         assert not out.exists()
-        return p.stderr
+        return printed.err
 
     # The quick preset has 4 dwells: a nonlinear structure's 5 parameters need 5.
     assert "fits 5 parameters but the campaign has 4 sine dwell(s)" in run("--nonlinear", "backlash")

@@ -81,7 +81,7 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
         mine = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(s)}
         check_servo_held(s, {k: v for k, v in fix.items() if k in mine}, {k: v for k, v in bounds.items() if k in mine},
                          {k: v for k, v in ties.items() if k in mine and expression_names(v) <= mine})
-    if tuple(order) != (0, 2):
+    if isinstance(order, str) or tuple(order) != (0, 2):
         raise ServoscopeError(f"--nonlinear {nonlinear}: the time-domain models are 2nd-order with a dead time; "
                               f"use --order 2 (not {order})")
     if nonlinear == "linear":

@@ -357,6 +357,8 @@ def identify(
     """
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
+    if not isinstance(order, str):
+        order = tuple(order)  # (0, 2) or [0, 2] alike
     held_fix, held_bounds = campaign.held_parameters(fix, bounds)
     held_ties = {**campaign.model_ties, **(ties or {})}
     check_nonlinear(campaign, nonlinear, order, held_fix, held_bounds, held_ties)
@@ -506,7 +508,7 @@ def identify(
         selection = servo_model(
             campaign, tracks, {label: f.window_s for label, f in fits.items()},
             {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
-            fitted if tuple(order) == (0, 2) and all(np.isfinite(list(fitted.values()))) else None,
+            fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
             nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
             ties=held_ties)
         warnings.extend(w for w in selection.selected.warnings if w not in warnings)

@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .figures import amplitude_figure, bode_figure, dwell_figure, overlay_figure, servo_traces_figure, step_figure
+from .figures import (amplitude_figure, bode_figure, candidate_traces_figure, describing_function_figure, dwell_figure,
+                      overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -366,6 +367,24 @@ def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportS
     if sel.traces:
         s.figure(servo_traces_figure(sel), f"Each test measured (dots) and simulated by the {sel.structure} model "
                  "(lines), its rest angle taken off, tests stacked.", "Measured and modelled traces", name="servo_traces")
+        shown = [sel] + [c for c in selection.candidates if c is not sel and c.structure == "linear"]
+        amplitude = {t.label: t.amplitude for t in result.campaign.tests}
+        fr = result.frequency_response
+        measured: dict[float, list] = {}
+        for label, f, g, se, ph in zip(fr.labels, fr.frequency_hz, fr.gain, fr.gain_stderr, fr.phase_deg):
+            measured.setdefault(round(float(f), 6), []).append((amplitude[label], g, se, ph))
+        s.figure(describing_function_figure(shown, measured), "Each dwell's measured gain and phase (points, ±1 "
+                 "standard error) against its input amplitude, and the models' describing functions (their "
+                 "fundamentals, simulated): a linear model's is flat; a nonlinearity's bends.",
+                 "Describing function", name="describing_function")
+        dwells = [tr for tr in sel.traces if tr.kind == "sine"]
+        if dwells:
+            # The dwell where the candidates disagree most shows what tells them apart.
+            worst = max(dwells, key=lambda tr: max(float(np.std(c.predict(tr) - sel.predict(tr)))
+                                                   for c in selection.candidates if c.traces))
+            s.figure(candidate_traces_figure(worst, [c for c in selection.candidates if c.traces]),
+                     f"{worst.label}, where the candidates differ most: measured (dots) and each candidate's "
+                     "simulation.", "Candidates against one trace", name="candidate_traces")
     return s
 
 

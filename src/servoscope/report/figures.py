@@ -234,3 +234,54 @@ def servo_traces_figure(fit) -> Figure:
     fit.plot(ax)
     fig.tight_layout()
     return fig
+
+
+def describing_function_figure(candidates, measured) -> Figure:
+    """Gain and phase against input amplitude at each frequency: measured, and each candidate's describing function.
+
+    ``candidates`` are :class:`~servoscope.sysid.servo_fit.ServoModelFit` (the selected first);
+    ``measured`` maps a frequency (Hz) to its dwells' ``[(amplitude, gain, gain_stderr, phase_deg)]``.
+    A linear model's line is flat; the selected structure's bends where the servo does.
+    """
+    fig, (ax_g, ax_p) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (f, rows) in enumerate(sorted(measured.items())):
+        colour = colours[i % len(colours)]
+        a = np.array([r[0] for r in rows])
+        ax_g.errorbar(a, [r[1] for r in rows], yerr=[r[2] for r in rows], fmt="o", color=colour, capsize=3,
+                      label=f"{f:.3g} Hz")
+        ax_p.plot(a, [r[3] for r in rows], "o", color=colour)
+        grid = np.geomspace(0.5 * a.min(), 1.5 * a.max(), 12)
+        for style, fit in zip(("-", ":", "--", "-."), candidates):
+            df = fit.describing_function(f, grid)
+            ax_g.plot(grid, np.abs(df), style, color=colour, lw=1)
+            # No phase where the model hardly moves (a play wider than the swing): it would be noise.
+            phase = np.where(np.abs(df) > 0.05 * np.max(np.abs(df)), np.degrees(np.angle(df)), np.nan)
+            # The measured phase's branch: the model's drawn beside it, not 360° away.
+            ref = rows[0][3]
+            ax_p.plot(grid, phase + 360.0 * np.round((ref - phase) / 360.0), style, color=colour, lw=1)
+    ax_g.set_xscale("log")
+    ax_g.set_ylabel("gain")
+    ax_p.set_ylabel("phase (deg)")
+    ax_p.set_xlabel("input amplitude")
+    names = ", ".join(f"{st} {c.structure}" for st, c in zip(("solid:", "dotted:", "dashed:", "dash-dot:"), candidates))
+    ax_g.set_title(f"Describing function per frequency ({names})", fontsize=9)
+    ax_g.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    return fig
+
+
+def candidate_traces_figure(trace, candidates) -> Figure:
+    """One test measured against every candidate's simulation (rest angles taken off)."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.0))
+    fit0 = candidates[0]
+    t = trace.time_s - trace.t0_s
+    ax.plot(t, trace.angle_rad - fit0.offsets.get(trace.label, 0.0), ".", ms=3, color="0.4", label="measured")
+    for c in candidates:
+        ax.plot(t, c.predict(trace) - c.offsets.get(trace.label, 0.0), lw=1, label=c.structure)
+    ax.set_xlabel("time after the input's start (s)")
+    ax.set_ylabel("angle (rad)")
+    ax.set_title(f"{trace.label}: measured and each candidate", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

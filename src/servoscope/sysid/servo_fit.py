@@ -190,6 +190,24 @@ class ServoModelFit:
         """The model's angle for ``trace``'s input, on its rest angle when it was fitted (else 0)."""
         return simulate_trace(trace, self.structure, self.params, time_s=time_s) + self.offsets.get(trace.label, 0.0)
 
+    def describing_function(self, frequency_hz: float, amplitudes: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """The model's gain and phase at ``frequency_hz`` for sines of each input amplitude (its fundamental).
+
+        A linear model's is one number; a nonlinear one's changes with the amplitude. Each sine
+        is simulated until its transient has died (five of the linear part's time constants),
+        then its fundamental taken over three periods.
+        """
+        p = self.params
+        settle = p["dead_time_s"] + 5.0 / max(p["natural_frequency_rad_s"] * p["damping_ratio"], 1e-3)
+        period = 1.0 / frequency_hz
+        t = np.arange(0.0, settle + 3.0 * period, min(period / 50.0, 1e-3))
+        out = []
+        for a in np.asarray(amplitudes, dtype=float):
+            trace = ServoTrace("df", "sine", float(a), float(frequency_hz), 0.0, t, np.zeros_like(t), 1.0, 0.0,
+                               (settle, float(t[-1])))
+            out.append(_fundamental(trace, simulate_trace(trace, self.structure, p)))
+        return np.asarray(out)
+
     @property
     def nonlinear_parameter(self) -> str | None:
         """The structure's own parameter's name (None for the linear model)."""
