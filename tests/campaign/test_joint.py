@@ -90,3 +90,27 @@ def test_manifest_model_tie(quick_campaign):
     bad.write_text(quick_campaign.read_text() + "\n[model]\ntie = {rate_limit_rad_s = 4}\n")
     with pytest.raises(ServoscopeError, match="model.tie.rate_limit_rad_s: must be an expression"):
         load_campaign(bad)
+
+
+def test_the_joint_linear_fit_equals_todays_within_its_intervals(quick_campaign, quick_result):
+    from servoscope.campaign import identify
+
+    # The quick campaign at full size (H.264, seed 3), its tracks reused: the time-domain linear model
+    # fitted to the dwells and the step together against the frequency-domain fit of the dwells alone.
+    res = identify(quick_campaign, tracks=quick_result.tracks, nonlinear="linear")
+    joint = res.servo_model.selected
+    assert joint.structure == "linear" and [c.structure for c in res.servo_model.candidates] == ["linear"]
+    today = quick_result.model
+    for name in ("natural_frequency_rad_s", "damping_ratio"):
+        lo, hi = today.ci95[name]
+        assert lo <= joint.params[name] <= hi, (name, joint.params[name], (lo, hi))
+    lo, hi = today.ci95["gain"]
+    assert lo <= joint.params["gain"] <= hi
+    # Both against the truth the twin rendered.
+    truth = json.loads((quick_campaign.parent / "truth.json").read_text())["model"]
+    for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
+        lo, hi = joint.ci95[name]
+        assert lo <= truth[name] <= hi, (name, truth[name], (lo, hi))
+    s = res.summary()
+    assert s["model"]["structure"] == "linear" and "rate_limit_rad_s" not in s["model"]
+    assert s["step"]["predicted_fit_percent"] > 99 and s["step"]["fit_percent"] == joint.step_fit_percent
