@@ -15,11 +15,11 @@ from ..angle.pivot import heave_px, pivot_motion
 from ..markers.tracker import Track
 from ..sysid import SineFit
 from ..sysid.heave import HeaveRow, dwell_heave
-from ..sysid.modes import ModeFit, fit_damped_mode
+from ..sysid.modes import ModeFit, fit_damped_mode, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["HEAVE_MIN_Z", "blade_modes", "heave_response"]
+__all__ = ["HEAVE_MIN_Z", "axis_of", "blade_modes", "dwell_modes", "heave_response"]
 
 #: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
 HEAVE_MIN_Z = 5.0
@@ -51,6 +51,49 @@ def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
     return [] if mode is None else [mode]
 
 
+def axis_of(tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None):
+    """The pitch axis (:class:`~servoscope.angle.pivot.PivotMotion`), found on the step's track, else on the dwell
+    that swings most (an axis found on a small swing is uncertain); None when none turned enough."""
+    candidates = [axis_track] if axis_track is not None else sorted(
+        (tracks[label] for label in fits), key=lambda tr: -float(np.nanmax(tr.angle_rad) - np.nanmin(tr.angle_rad)))
+    for track in candidates:
+        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+        if pivot is not None:
+            return pivot
+    return None
+
+
+def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None,
+                model) -> ModeFit | None:
+    """The blade's mode from the dwells: each one's heave rings down after its sine starts, beside the forced motion.
+
+    Each dwell's heave is fitted, from the servo's settling on (its dead time and four time
+    constants 1/(ζ·ωn) after the input's start), as a ring-down plus a sine at the dwell's
+    frequency (:func:`~servoscope.sysid.modes.fit_damped_mode` with ``forced_hz``); a dwell
+    within the mode's resonance (3ζ + 2 % of its frequency) is left out, its free and forced
+    motions one; the rest are pooled (:func:`~servoscope.sysid.modes.pool_modes`).
+    """
+    pivot = axis_of(tracks, fits, axis_track)
+    if pivot is None:
+        return None
+    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
+    settle = (model.dead_time_s or 0.0) + (4.0 / decay if decay > 0 and math.isfinite(decay) else 0.3)
+    found = []
+    for test in campaign.sine_tests:
+        fit, track = fits.get(test.label), tracks.get(test.label)
+        t0 = None if track is None else input_start(test, track)
+        if fit is None or t0 is None:
+            continue
+        heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+        before = heave[(track.angle_time_s < t0) & np.isfinite(heave)]
+        noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
+        mode = fit_damped_mode(track.angle_time_s, heave, t0 + settle, noise=noise, source="dwells",
+                               forced_hz=test.frequency_hz)
+        if mode is not None and abs(test.frequency_hz / mode.frequency_hz - 1.0) >= 3.0 * mode.damping_ratio + 0.02:
+            found.append(mode)
+    return pool_modes(found, "dwells")
+
+
 def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit],
                    axis_track: Track | None) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
@@ -60,13 +103,7 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     read as heave at the input frequency. A campaign whose dwells show no heave beyond
     :data:`HEAVE_MIN_Z` standard errors (a rigid blade) gets none, so its result is as before.
     """
-    candidates = [axis_track] if axis_track is not None else sorted(
-        (tracks[label] for label in fits), key=lambda tr: -float(np.nanmax(tr.angle_rad) - np.nanmin(tr.angle_rad)))
-    pivot = None
-    for track in candidates:
-        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
-        if pivot is not None:
-            break
+    pivot = axis_of(tracks, fits, axis_track)
     if pivot is None:
         return []
     rows = []

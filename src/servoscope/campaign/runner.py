@@ -27,7 +27,7 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
-from .blade import blade_modes, heave_response
+from .blade import blade_modes, dwell_modes, heave_response
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
@@ -482,8 +482,14 @@ def identify(
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
     modes = blade_modes(step, tracks[step_label] if step_label else None, model)
+    from_dwells = dwell_modes(campaign, tracks, fits, tracks[step_label] if step_label else None, model)
+    modes += [from_dwells] if from_dwells is not None else []
     heave = heave_response(campaign, tracks, fits, tracks[step_label] if step_label else None)
+    warned: list[float] = []
     for mode in modes:
+        if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
+            continue  # the same mode seen in the step and the dwells: one warning
+        warned.append(mode.frequency_hz)
         near = [t.label for t in campaign.sine_tests if t.frequency_hz
                 and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
         if near:

@@ -13,15 +13,16 @@ carried to f and ζ by the delta method, plus a systematic part
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import curve_fit
+from scipy.optimize import OptimizeWarning, curve_fit
 
 from servoscope.results import jsonable
 
-__all__ = ["ModeFit", "fit_damped_mode"]
+__all__ = ["ModeFit", "fit_damped_mode", "pool_modes"]
 
 #: A ring-down is taken as seen when its amplitude is this many times the signal's noise.
 MIN_SNR = 10.0
@@ -77,7 +78,7 @@ def _ringdown(t, a, sigma, wd, phi, c):
 
 
 def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise: float | None = None,
-                    source: str = "step") -> ModeFit | None:
+                    source: str = "step", forced_hz: float | None = None) -> ModeFit | None:
     """Fit a ring-down to ``y`` from ``start_s`` on; None when there is none to see.
 
     Parameters
@@ -91,6 +92,9 @@ def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise:
         is not fitted. Default: from the fit's own residual.
     source : str
         Recorded with the mode.
+    forced_hz : float, optional
+        A sine dwell's frequency: the forced motion there (a sine of any amplitude and phase)
+        is fitted beside the ring-down, and the spectral peak looked for away from it.
 
     Returns
     -------
@@ -104,20 +108,38 @@ def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise:
     dt = float(np.median(np.diff(t)))
     # The spectral peak of the window (mean removed, zero-padded 16x) starts the frequency.
     x = v - v.mean()
+    forced = None
+    if forced_hz is not None:
+        wf = 2.0 * math.pi * forced_hz
+        forced = np.column_stack([np.sin(wf * t), np.cos(wf * t)])
+        b = np.linalg.lstsq(np.column_stack([forced, np.ones_like(t)]), v, rcond=None)[0]
+        x = v - forced @ b[:2] - b[2]
     spectrum = np.abs(np.fft.rfft(x * np.hanning(x.size), 16 * x.size))
     freqs = np.fft.rfftfreq(16 * x.size, dt)
     spectrum[freqs < 2.0 / (t[-1] + dt)] = 0.0  # at least two cycles in the window
+    if forced_hz is not None:
+        spectrum[np.abs(freqs - forced_hz) < 1.5 / (t[-1] + dt)] = 0.0  # the forced line's own width
     f0 = float(freqs[int(np.argmax(spectrum))])
     if not f0 > 0:
         return None
     w0 = 2.0 * math.pi * f0
     a0 = float(np.max(np.abs(x[: max(3, int(round(1.0 / (f0 * dt))))])))
+    p0 = [a0, 0.03 * w0, w0, 0.0, float(v.mean())]
+    if forced is None:
+        model = _ringdown
+    else:
+        def model(tt, a, sigma, wd, phi, c, bs, bc):
+            return _ringdown(tt, a, sigma, wd, phi, c) + bs * np.sin(wf * tt) + bc * np.cos(wf * tt)
+        p0 += [float(b[0]), float(b[1])]
     try:
-        popt, pcov = curve_fit(_ringdown, t, v, p0=[a0, 0.03 * w0, w0, 0.0, float(v.mean())], maxfev=20000)
+        with warnings.catch_warnings():
+            # A fit whose covariance cannot be estimated is refused below (non-finite pcov): no warning.
+            warnings.simplefilter("ignore", OptimizeWarning)
+            popt, pcov = curve_fit(model, t, v, p0=p0, maxfev=20000)
     except (RuntimeError, ValueError):
         return None
-    a, sigma, wd, _, _ = popt
-    residual = v - _ringdown(t, *popt)
+    a, sigma, wd = popt[:3]
+    residual = v - model(t, *popt)
     scatter = float(np.std(residual))
     if abs(a) < MIN_SNR * max(scatter, noise or 0.0) or not (wd > 0 and sigma > 0) or not np.all(np.isfinite(pcov)):
         return None
@@ -140,3 +162,30 @@ def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise:
     se_f = math.hypot(math.sqrt(max(float(g_f @ cov @ g_f), 0.0)), MODE_SYSTEMATIC["frequency"] * f)
     se_z = math.hypot(math.sqrt(max(float(g_z @ cov @ g_z), 0.0)), MODE_SYSTEMATIC["damping"] * z)
     return ModeFit(f, se_f, z, se_z, float(abs(a)), source)
+
+
+def pool_modes(modes: list[ModeFit], source: str) -> ModeFit | None:
+    """One mode from several fits of it (each dwell's ring-down): inverse-variance means.
+
+    The systematic part (:data:`MODE_SYSTEMATIC`) is common to every fit, so it is taken off
+    before pooling and added once after; fits that disagree beyond their errors (χ² over
+    its degrees of freedom above 1) widen the pooled error by its square root. None when
+    ``modes`` is empty.
+    """
+    if not modes:
+        return None
+    out = {}
+    for key, value_of, se_of in (("frequency", lambda m: m.frequency_hz, lambda m: m.frequency_stderr_hz),
+                                 ("damping", lambda m: m.damping_ratio, lambda m: m.damping_ratio_stderr)):
+        v = np.array([value_of(m) for m in modes], dtype=float)
+        se = np.array([se_of(m) for m in modes], dtype=float)
+        stat = np.sqrt(np.maximum(se**2 - (MODE_SYSTEMATIC[key] * v) ** 2, (1e-3 * se) ** 2))
+        w = 1.0 / stat**2
+        mean = float(np.sum(w * v) / np.sum(w))
+        pooled = math.sqrt(1.0 / float(np.sum(w)))
+        if v.size > 1:
+            chi2 = float(np.sum(w * (v - mean) ** 2)) / (v.size - 1)
+            pooled *= math.sqrt(max(chi2, 1.0))
+        out[key] = (mean, math.hypot(pooled, MODE_SYSTEMATIC[key] * mean))
+    amplitude = max(m.amplitude for m in modes)
+    return ModeFit(out["frequency"][0], out["frequency"][1], out["damping"][0], out["damping"][1], amplitude, source)
