@@ -132,14 +132,17 @@ def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise:
             return _ringdown(tt, a, sigma, wd, phi, c) + bs * np.sin(wf * tt) + bc * np.cos(wf * tt)
         p0 += [float(b[0]), float(b[1])]
     try:
-        with warnings.catch_warnings():
-            # A fit whose covariance cannot be estimated is refused below (non-finite pcov): no warning.
+        # A fit that wanders (a growing exponential overflows) or whose covariance cannot be estimated
+        # is refused below (σ > 0, finite residual and covariance): no warning on the way.
+        with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore"):
             warnings.simplefilter("ignore", OptimizeWarning)
             popt, pcov = curve_fit(model, t, v, p0=p0, maxfev=20000)
+            residual = v - model(t, *popt)
     except (RuntimeError, ValueError):
         return None
     a, sigma, wd = popt[:3]
-    residual = v - model(t, *popt)
+    if not np.all(np.isfinite(residual)):
+        return None
     scatter = float(np.std(residual))
     if abs(a) < MIN_SNR * max(scatter, noise or 0.0) or not (wd > 0 and sigma > 0) or not np.all(np.isfinite(pcov)):
         return None
