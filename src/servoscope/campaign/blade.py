@@ -63,6 +63,15 @@ def axis_of(tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Trac
     return None
 
 
+def _dwell_heaves(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot):
+    """Each fitted dwell with a known input start: (test, track, its sine fit, t0, heave per frame)."""
+    for test in campaign.sine_tests:
+        fit, track = fits.get(test.label), tracks.get(test.label)
+        t0 = None if track is None else input_start(test, track)
+        if fit is not None and t0 is not None:
+            yield test, track, fit, t0, heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+
+
 def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None,
                 model) -> ModeFit | None:
     """The blade's mode from the dwells: each one's heave rings down after its sine starts, beside the forced motion.
@@ -79,12 +88,7 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
     decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
     settle = (model.dead_time_s or 0.0) + (4.0 / decay if decay > 0 and math.isfinite(decay) else 0.3)
     found = []
-    for test in campaign.sine_tests:
-        fit, track = fits.get(test.label), tracks.get(test.label)
-        t0 = None if track is None else input_start(test, track)
-        if fit is None or t0 is None:
-            continue
-        heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+    for test, track, _, t0, heave in _dwell_heaves(campaign, tracks, fits, pivot):
         before = heave[(track.angle_time_s < t0) & np.isfinite(heave)]
         noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
         mode = fit_damped_mode(track.angle_time_s, heave, t0 + settle, noise=noise, source="dwells",
@@ -107,15 +111,10 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     if pivot is None:
         return []
     rows = []
-    for test in campaign.sine_tests:
-        fit, track = fits.get(test.label), tracks.get(test.label)
-        t0 = None if track is None else input_start(test, track)
-        if fit is None or t0 is None:
-            continue
-        h = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+    for test, track, fit, t0, h in _dwell_heaves(campaign, tracks, fits, pivot):
         row = dwell_heave(track.angle_time_s, h, test.frequency_hz, t0, test.amplitude, fit.window_s, test.label)
         if row is not None:
             rows.append(row)
-    if not any(r.amplitude_px >= HEAVE_MIN_Z * r.gain_stderr * abs(r.amplitude_px / r.gain) for r in rows if r.gain):
+    if not any(r.gain >= HEAVE_MIN_Z * r.gain_stderr for r in rows):
         return []
     return rows
