@@ -111,12 +111,14 @@ def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str
         t0 = input_start(test, track)
         if t0 is None or track.n_valid < 10:
             continue
-        noise = track.summary().get("angle_noise_measured_rad") or track.summary().get("angle_noise_rad")
+        summary = track.summary()
+        noise = summary.get("angle_noise_measured_rad") or summary.get("angle_noise_rad")
+        separation = summary.get("mean_separation_px")
         v = track.valid
         traces.append(ServoTrace(test.label, test.kind, test.amplitude, test.frequency_hz, float(t0),
                                  np.asarray(track.angle_time_s[v], float), np.asarray(track.angle_rad[v], float),
                                  float(noise) if noise and noise > 0 else 1e-4, exposure_s,
-                                 windows.get(test.label)))
+                                 windows.get(test.label), 0.5 * float(separation) if separation else math.nan))
     return traces
 
 

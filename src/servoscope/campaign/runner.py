@@ -517,7 +517,7 @@ def identify(
             fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
             nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
             ties=held_ties)
-        warnings.extend(w for w in selection.selected.warnings if w not in warnings)
+        warnings.extend(w for w in selection.warnings + selection.selected.warnings if w not in warnings)
     predicted = None
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)

@@ -50,11 +50,12 @@ __all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost"
 
 #: Systematic uncertainty of the linear part from whole traces, added to the fit's: relative for
 #: the gain, ωn and ζ, seconds for the dead time. Measured on the twin's quick campaigns
-#: (480×384, raw, seeds 0–2; linear, rate-limited, backlash and quantized servos): errors up
-#: to 0.1 % (K), 0.17 % (ωn), 0.13 % (ζ), 0.05 ms (dead time), several of the fit's own
-#: standard errors and common to all tests (so no jackknife sees them): what the tracker's
-#: sub-pixel bias and the rendered exposure do to a whole trace.
-TRACE_SYSTEMATIC = {"gain": 6e-4, "natural_frequency_rad_s": 1.2e-3, "damping_ratio": 1e-3, "dead_time_s": 4e-5}
+#: (480×384, seeds 0–2; linear, rate-limited, backlash and quantized servos): errors up to
+#: 0.1 % (K), 0.17 % (ωn), 0.13 % (ζ), 0.05 ms (dead time) raw, and 0.26 % (ωn), 0.39 % (ζ),
+#: 0.11 ms under H.264 at 20 Mbit/s, several of the fit's own standard errors and common to
+#: all tests (so no jackknife sees them): the tracker's sub-pixel bias, the codec's, the
+#: rendered exposure.
+TRACE_SYSTEMATIC = {"gain": 6e-4, "natural_frequency_rad_s": 1.5e-3, "damping_ratio": 2.5e-3, "dead_time_s": 6e-5}
 _Z95 = 1.959963984540054
 _CHI2_1_95 = 3.841458820694124
 #: Positive parameters, fitted on a log scale.

@@ -26,10 +26,17 @@ from .servo_fit import (ServoModelFit, check_servo_held, dwell_cost, expression_
                         lag1, linear_starts, measured_noise, trace_group)
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
 
-__all__ = ["BIC_MARGIN", "STEP_FIT_PREDICTS", "ServoModelSelection", "cross_validate", "select_servo_model"]
+__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection", "cross_validate", "effect_px",
+           "select_servo_model"]
 
 #: BIC a nonlinear structure must gain over the linear model to be selected.
 BIC_MARGIN = 10.0
+#: Smallest change a nonlinear structure may make to the stickers' motion (RMS over the traces,
+#: px) to be selected: a codec's motion prediction holds a sticker still near each turn, which
+#: reads as play. Measured on the twin's linear servo under H.264 (quick preset, 480×384,
+#: seeds 0 and 1): "backlash" of 0.00026 rad won the BIC by 500 while moving the stickers
+#: 0.013–0.016 px RMS; a true play of 0.004 rad moves them 0.23 px.
+MIN_EFFECT_PX = 0.05
 _Z95 = 1.959963984540054
 
 
@@ -49,25 +56,30 @@ class ServoModelSelection:
         ``dwells_to_step`` (the model fitted to the dwells alone, its fit on the step in
         percent), ``step_to_dwells`` (fitted to the step alone, its J on the dwells) and a
         ``verdict``; absent parts are None.
+    warnings : list of str
+        Why a better-fitting structure was not selected (its effect under
+        :data:`MIN_EFFECT_PX`).
     """
 
     candidates: list[ServoModelFit]
     selected: ServoModelFit
     scale: float
     cross_validation: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
         """Plain types: the selected structure, every candidate's fit, the cross-validation."""
         return jsonable({"selected": self.selected.structure, "scale": self.scale,
                          "candidates": [c.summary() for c in self.candidates],
-                         "cross_validation": dict(self.cross_validation)})
+                         "cross_validation": dict(self.cross_validation), "warnings": list(self.warnings)})
 
     @classmethod
     def from_summary(cls, data: dict[str, Any]) -> "ServoModelSelection":
         """Rebuild from :meth:`summary` (the fits without their traces: they are the tracks')."""
         fits = [ServoModelFit.from_summary(c) for c in data["candidates"]]
         selected = next(f for f in fits if f.structure == data["selected"])
-        return cls(fits, selected, float(data["scale"]), dict(data.get("cross_validation") or {}))
+        return cls(fits, selected, float(data["scale"]), dict(data.get("cross_validation") or {}),
+                   list(data.get("warnings") or []))
 
     def to_pandas(self) -> Any:
         """One row per candidate structure."""
@@ -172,14 +184,38 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
     scale = _information(fits)
     linear = fits[0]
     selected = min(fits[1:], key=lambda f: f.bic, default=linear)
+    notes: list[str] = []
     if selected is not linear and not linear.bic - selected.bic > BIC_MARGIN:
         selected = linear
+    if selected is not linear:
+        effect = effect_px(selected, linear)
+        if effect < MIN_EFFECT_PX:
+            notes.append(f"the {selected.structure} model fits better (BIC {linear.bic - selected.bic:.0f} lower) but "
+                         f"moves the stickers only {effect:.3f} px RMS away from the linear model's, under the "
+                         f"{MIN_EFFECT_PX} px a codec's motion prediction can fake: the linear model is kept")
+            selected = linear
     if len(structures) == 1 and structures[0] != "linear":
         selected = fits[1]  # asked for by name: that structure, the others for comparison
     _jackknife(traces, selected, sigma, held(selected.structure, fix), held(selected.structure, bounds))
     cv = cross_validate(traces, selected, sigma=sigma, response=response, fix=held(selected.structure, fix),
                         bounds=held(selected.structure, bounds))
-    return ServoModelSelection(fits, selected, scale, cv)
+    return ServoModelSelection(fits, selected, scale, cv, notes)
+
+
+def effect_px(fit: ServoModelFit, reference: ServoModelFit) -> float:
+    """How far ``fit`` moves the stickers from ``reference``'s prediction, RMS over every sample, px.
+
+    Each trace's angle difference times its sticker radius (inf where the radius is not known:
+    no floor can be applied then).
+    """
+    moves = []
+    for tr in fit.traces:
+        d = simulate_trace(tr, fit.structure, fit.params) - simulate_trace(tr, reference.structure, reference.params)
+        d = d - d.mean()  # each test's rest angle is fitted: a constant difference is none
+        moves.append(d * tr.sticker_radius_px)
+    m = np.concatenate(moves) if moves else np.array([np.nan])
+    value = float(np.sqrt(np.mean(m**2)))
+    return value if math.isfinite(value) else math.inf
 
 
 def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, float], fix: dict, bounds: dict) -> None:

@@ -82,6 +82,9 @@ class ServoTrace:
         The exposure that averages each sample (0: instantaneous).
     window_s : (float, float) or None
         A dwell's steady-state window, where its fundamental was measured (for CIFER's J).
+    sticker_radius_px : float
+        How far each sticker moves per radian of pitch (half their separation), px; NaN when
+        not known. It turns a model's effect into what the picture shows.
     """
 
     label: str
@@ -94,6 +97,7 @@ class ServoTrace:
     noise_rad: float
     exposure_s: float = 0.0
     window_s: tuple[float, float] | None = None
+    sticker_radius_px: float = math.nan
 
     def __post_init__(self) -> None:
         if self.kind not in ("sine", "step"):
