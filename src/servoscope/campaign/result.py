@@ -412,10 +412,14 @@ class IdentificationResult:
             label = summary.pop("label")
             track = tracks[label]
             unit_step = None
+            td = data["model"].get("time_domain")
+            shape = model.transfer_function
+            if summary.get("model_source", "frequency-domain model") != "frequency-domain model" and td is not None:
+                shape = ServoModelSelection.from_summary(td).selected.linear_transfer_function
             if summary.get("dead_time_s") is not None and track.n_frames > 1:
                 # The model's step shape, as analyse_step made it for the fit (same span and step).
                 t = track.angle_time_s[track.valid]
-                unit_step = unit_step_function(model.transfer_function, float(t[-1] - summary["t0_s"]) + 1.0,
+                unit_step = unit_step_function(shape, float(t[-1] - summary["t0_s"]) + 1.0,
                                                float(np.median(np.diff(t))))
             step = StepAnalysis.from_summary(summary, time_s=track.angle_time_s, y=track.angle_rad,
                                              unit_step=unit_step)

@@ -444,6 +444,19 @@ def identify(
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
 
+    exposure_s = campaign.exposure_s if campaign.exposure_s is not None else (
+        exposure.value_s if exposure.known else 0.0)
+    fitted = {"gain": model.gain, **model.params, "dead_time_s": model.dead_time_s}
+    selection = None
+    if nonlinear != "none":
+        t0_se = math.hypot(shared_t0_s, float(np.median(list(own_t0_stderr.values()) or [0.0])))
+        selection = servo_model(
+            campaign, tracks, {label: f.window_s for label, f in fits.items()},
+            {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
+            fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
+            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
+            ties=held_ties)
+        warnings.extend(w for w in selection.warnings + selection.selected.warnings if w not in warnings)
     step = None
     step_label = None
     if campaign.step_tests:
@@ -468,8 +481,22 @@ def identify(
             except ServoscopeError as exc:
                 # Also when the analysis stood and only its dead time's model error failed: left out whole.
                 step = None
-                warnings.append(f"{test.label}: step test left out: {exc}")
-            else:
+                if selection is not None:
+                    # A servo the frequency-domain model cannot describe (it ended unstable): the step is
+                    # analysed against the time-domain model's linear part, its dead time's error with it.
+                    try:
+                        step = replace(run_step(selection.selected.linear_transfer_function),
+                                       model_source=f"{selection.selected.structure} model's linear part")
+                        linear_se = selection.selected.stderr.get("dead_time_s") or 0.0
+                        if step.dead_time_stderr_s is not None:
+                            step = replace(step, dead_time_stderr_s=math.hypot(step.dead_time_stderr_s, linear_se))
+                        warnings.append(f"{test.label}: step analysed against the {selection.selected.structure} "
+                                        f"model's linear part (the frequency-domain model: {exc})")
+                    except ServoscopeError:
+                        step = None
+                if step is None:
+                    warnings.append(f"{test.label}: step test left out: {exc}")
+            if step is not None:
                 if not step.output_moved:
                     # Metrics of a step that never moved would be NaN or noise.
                     warnings.append(
@@ -505,19 +532,6 @@ def identify(
     disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
     if disagreement:
         warnings.append(disagreement)
-    exposure_s = campaign.exposure_s if campaign.exposure_s is not None else (
-        exposure.value_s if exposure.known else 0.0)
-    fitted = {"gain": model.gain, **model.params, "dead_time_s": model.dead_time_s}
-    selection = None
-    if nonlinear != "none":
-        t0_se = math.hypot(shared_t0_s, float(np.median(list(own_t0_stderr.values()) or [0.0])))
-        selection = servo_model(
-            campaign, tracks, {label: f.window_s for label, f in fits.items()},
-            {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
-            fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
-            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
-            ties=held_ties)
-        warnings.extend(w for w in selection.warnings + selection.selected.warnings if w not in warnings)
     predicted = None
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)

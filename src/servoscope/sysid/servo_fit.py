@@ -210,6 +210,14 @@ class ServoModelFit:
         return np.asarray(out)
 
     @property
+    def linear_transfer_function(self) -> Any:
+        """The linear part, ``K·ωn²/(s² + 2ζωn·s + ωn²)`` (python-control; the dead time not included)."""
+        import control
+
+        k, wn, z = (self.params[n] for n in ("gain", "natural_frequency_rad_s", "damping_ratio"))
+        return control.tf([k * wn * wn], [1.0, 2.0 * z * wn, wn * wn])
+
+    @property
     def nonlinear_parameter(self) -> str | None:
         """The structure's own parameter's name (None for the linear model)."""
         return NONLINEAR_PARAMETER.get(self.structure)

@@ -82,6 +82,10 @@ class StepAnalysis:
         The model's own step metrics (:func:`model_step_metrics` with the
         fitted dead time, scaled to this step), for comparison with the
         measured ones; None without a model.
+    model_source : str
+        Which model's shape the dead time was fitted against: the frequency-domain model, or
+        a time-domain model's linear part where that one could not stand (``identify
+        --nonlinear``).
     """
 
     t0_s: float
@@ -108,6 +112,7 @@ class StepAnalysis:
         default=None, repr=False, compare=False
     )
     predicted_metrics: dict[str, float] | None = field(default=None, compare=False)
+    model_source: str = "frequency-domain model"
 
     def predicted(self, time_s: ArrayLike) -> NDArray[np.float64]:
         """Model prediction ``b + g*step_size*s(t - t0 - tau)`` at `time_s`.
@@ -204,6 +209,7 @@ class StepAnalysis:
                 "t0_s": self.t0_s,
                 "step_size": self.step_size,
                 "predicted": None if self.predicted_metrics is None else dict(self.predicted_metrics),
+                "model_source": self.model_source,
                 "warnings": list(self.warnings),
             }
         )
