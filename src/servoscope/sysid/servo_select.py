@@ -174,13 +174,10 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
             fits.append(replace(f, chi2=chi2, sigma=dict(sigma),
                                 J=dwell_cost(f.params, s, traces, response) if response else math.nan))
             continue
-        nl = NONLINEAR_PARAMETER.get(s)
-        warm = {**f.params} if s != "quantization" else {k: f.params[k] for k in LINEAR_PARAMETERS}
-        if nl is not None and s != "quantization":
-            warm[nl] = f.params[nl]
+        # From the first fit (the quantization step is profiled again, not started).
+        warm = {k: v for k, v in f.params.items() if not (s == "quantization" and k == "quantization_step")}
         fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), ties=held(s, ties),
-                                    sigma=sigma,
-                                    response=response, t0_stderr_s=t0_stderr_s))
+                                    sigma=sigma, response=response, t0_stderr_s=t0_stderr_s))
     scale = _information(fits)
     linear = fits[0]
     selected = min(fits[1:], key=lambda f: f.bic, default=linear)
