@@ -118,7 +118,8 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
     assert checked >= 2
     from servoscope.report.build import build_report
 
-    assert "heave gain (px per input unit)" in build_report(res)
+    html = build_report(res)
+    assert "heave gain (px per input unit)" in html and "Heave against frequency" in html
     # The pitch identification is not disturbed by the flapping: the heave moves both stickers alike.
     for name in ("gain", "natural_frequency_rad_s"):
         assert s["model"][name] == pytest.approx(truth["model"][name], rel=0.01)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .figures import (amplitude_figure, bode_figure, candidate_traces_figure, describing_function_figure, dwell_figure,
-                      overlay_figure, servo_traces_figure, step_figure)
+                      heave_figure, overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -207,6 +207,10 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                 [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
                   *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
                  for r in result.heave_response])
+        s.figure(heave_figure(result.heave_response, result.modes), "The blade's heave (the markers' line's distance "
+                 "from the pitch axis) at each dwell's frequency, against the input: a blade that flaps answers most "
+                 "near its mode. Error bars: ±1 standard error, 0.05 px systematic included.", "Heave against frequency",
+                 name="heave")
     if result.amplitude_checks:
         verdicts = "; ".join(f"{c.frequency_hz:.3g} Hz: {100 * c.change:+.2f} % from {c.amplitudes[0]:g} to "
                              f"{c.amplitudes[-1]:g} (p = {c.p_value:.2g}, {'linear' if c.linear else 'NOT linear'})"

@@ -285,3 +285,27 @@ def candidate_traces_figure(trace, candidates) -> Figure:
     ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def heave_figure(rows, modes) -> Figure:
+    """The blade's heave per dwell against frequency (gain px per input unit, phase), its modes marked.
+
+    A second frequency response beside the pitch's: ``rows`` are
+    :class:`~servoscope.sysid.heave.HeaveRow`, ``modes`` :class:`~servoscope.sysid.modes.ModeFit`.
+    """
+    fig, (ax_g, ax_p) = plt.subplots(2, 1, figsize=(7.5, 5.4), sharex=True)
+    f = np.array([r.frequency_hz for r in rows])
+    ax_g.errorbar(f, [r.gain for r in rows], yerr=[r.gain_stderr for r in rows], fmt="o", capsize=3)
+    ax_p.errorbar(f, [r.phase_deg for r in rows], yerr=[r.phase_stderr_deg for r in rows], fmt="o", capsize=3)
+    for m in modes:
+        for ax in (ax_g, ax_p):
+            ax.axvspan(m.frequency_hz * (1 - m.damping_ratio), m.frequency_hz * (1 + m.damping_ratio), color="0.85")
+            ax.axvline(m.frequency_hz, color="0.4", lw=0.8, ls="--")
+    ax_g.set_xscale("log")
+    ax_g.set_yscale("log")
+    ax_g.set_ylabel("heave gain (px per input unit)")
+    ax_p.set_ylabel("heave phase (deg)")
+    ax_p.set_xlabel("frequency (Hz)")
+    ax_g.set_title("The blade's heave at each dwell's frequency (dashed: its mode, shaded: ±ζ)", fontsize=9)
+    fig.tight_layout()
+    return fig
