@@ -25,7 +25,7 @@ __all__ = ["HEAVE_MIN_Z", "axis_of", "blade_modes", "dwell_modes", "heave_respon
 HEAVE_MIN_Z = 5.0
 
 
-def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
+def blade_modes(step, track: Track | None, model, pivot) -> list[ModeFit]:
     """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
 
     The heave is the markers' line's distance from the pitch axis
@@ -33,14 +33,12 @@ def blade_modes(step, track: Track | None, model) -> list[ModeFit]:
     settled (the step's measured settling time after t0, else its dead time and
     0.3 s) and four of the model's time constants 1/(ζ·ωn) more: the servo's own
     forced motion, 2 % at settling, biased the twin's 9 Hz mode by 0.03 %, 4 σ of its
-    fit. Its noise is the heave's frame-to-frame scatter before the input.
+    fit. Its noise is the heave's frame-to-frame scatter before the input. ``pivot`` is the
+    pitch axis (:func:`axis_of`, found on this step's track).
     """
-    if step is None or track is None:
+    if step is None or track is None or pivot is None:
         return []
     t0_s = step.t0_s
-    pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
-    if pivot is None:
-        return []
     heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
     before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
     noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
@@ -72,7 +70,7 @@ def _dwell_heaves(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, 
             yield test, track, fit, t0, heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
 
 
-def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None,
+def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
                 model) -> ModeFit | None:
     """The blade's mode from the dwells: each one's heave rings down after its sine starts, beside the forced motion.
 
@@ -80,9 +78,9 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
     constants 1/(ζ·ωn) after the input's start), as a ring-down plus a sine at the dwell's
     frequency (:func:`~servoscope.sysid.modes.fit_damped_mode` with ``forced_hz``); a dwell
     within the mode's resonance (3ζ + 2 % of its frequency) is left out, its free and forced
-    motions one; the rest are pooled (:func:`~servoscope.sysid.modes.pool_modes`).
+    motions one; the rest are pooled (:func:`~servoscope.sysid.modes.pool_modes`). ``pivot``
+    is the pitch axis (:func:`axis_of`).
     """
-    pivot = axis_of(tracks, fits, axis_track)
     if pivot is None:
         return None
     decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
@@ -98,16 +96,14 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
     return pool_modes(found, "dwells")
 
 
-def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit],
-                   axis_track: Track | None) -> list[HeaveRow]:
+def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
 
-    The pitch axis is found once, on the step's track (its swing is the largest), else on the
-    dwell that swings most: an axis found on a small swing is uncertain, and its error would
-    read as heave at the input frequency. A campaign whose dwells show no heave beyond
-    :data:`HEAVE_MIN_Z` standard errors (a rigid blade) gets none, so its result is as before.
+    ``pivot`` is the pitch axis (:func:`axis_of`: an axis found on a small swing is uncertain,
+    and its error would read as heave at the input frequency). A campaign whose dwells show
+    no heave beyond :data:`HEAVE_MIN_Z` standard errors (a rigid blade) gets none, so its
+    result is as before.
     """
-    pivot = axis_of(tracks, fits, axis_track)
     if pivot is None:
         return []
     rows = []

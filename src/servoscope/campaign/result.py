@@ -23,6 +23,7 @@ from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFi
 from ..sysid.linearity import AmplitudeCheck
 from ..sysid.heave import HeaveRow
 from ..sysid.modes import ModeFit
+from ..sysid.servo_fit import fit_percent
 from ..sysid.servo_select import ServoModelSelection
 from ..sysid.servo_sim import NONLINEAR_PARAMETER
 from ..sysid.model_text import model_equation
@@ -300,8 +301,8 @@ class IdentificationResult:
             # The step analysis's own fit of the model's shape (its dead time and level fitted to the step).
             y = self.step.y[self.step.time_s >= self.step.t0_s]
             ok = np.isfinite(y) & np.isfinite(residual)
-            spread = float(np.linalg.norm(y[ok] - y[ok].mean())) if ok.any() else 0.0
-            fit = 100.0 * (1.0 - float(np.linalg.norm(residual[ok])) / spread) if spread > 0 else None
+            value = fit_percent(y[ok], y[ok] - residual[ok]) if ok.any() else math.nan
+            fit = value if math.isfinite(value) else None
         return {"fit_percent": fit, "predicted_fit_percent": self.predicted_step_fit_percent}
 
     def write_tables(self, out_dir: str | Path) -> dict[str, Path]:

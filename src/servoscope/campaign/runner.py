@@ -27,7 +27,7 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
-from .blade import blade_modes, dwell_modes, heave_response
+from .blade import axis_of, blade_modes, dwell_modes, heave_response
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
@@ -508,10 +508,13 @@ def identify(
                     step_label = test.label
         if len(campaign.step_tests) > 1:
             warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
-    modes = blade_modes(step, tracks[step_label] if step_label else None, model)
-    from_dwells = dwell_modes(campaign, tracks, fits, tracks[step_label] if step_label else None, model)
+    # The pitch axis once, for the blade's mode (step and dwells) and its heave per dwell.
+    step_track = tracks[step_label] if step_label else None
+    pivot = axis_of(tracks, fits, step_track)
+    modes = blade_modes(step, step_track, model, pivot)
+    from_dwells = dwell_modes(campaign, tracks, fits, pivot, model)
     modes += [from_dwells] if from_dwells is not None else []
-    heave = heave_response(campaign, tracks, fits, tracks[step_label] if step_label else None)
+    heave = heave_response(campaign, tracks, fits, pivot)
     warned: list[float] = []
     for mode in modes:
         if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
