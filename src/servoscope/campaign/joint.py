@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import ServoscopeError
 from ..markers.tracker import Track
 from ..sysid.servo_fit import check_servo_held, expression_names, fit_percent
-from ..sysid.servo_select import ServoModelSelection, select_servo_model
+from ..sysid.servo_select import ServoModelSelection, check_held_names, select_servo_model
 from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 from .manifest import Campaign
 from .result import input_start
@@ -68,15 +68,7 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
                                   f"{next(s for s, p in NONLINEAR_PARAMETER.items() if p == own[0])} (or auto)")
         return
     tried = structures_of(nonlinear)
-    known = {*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER)}
-    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
-        if name not in known:
-            import difflib
-
-            close = difflib.get_close_matches(name, sorted(known), n=1)
-            raise ServoscopeError(f"no model of --nonlinear {nonlinear} has a parameter {name!r}"
-                                  + (f" (did you mean {close[0]!r}?)" if close else "")
-                                  + f"; the parameters: {', '.join(sorted(known))}")
+    check_held_names(tried, fix, bounds, ties, f"--nonlinear {nonlinear}")
     for s in tried:
         mine = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(s)}
         check_servo_held(s, {k: v for k, v in fix.items() if k in mine}, {k: v for k, v in bounds.items() if k in mine},

@@ -22,12 +22,12 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import ServoscopeError
 from ..results import import_pandas, jsonable
-from .servo_fit import (ServoModelFit, check_servo_held, dwell_cost, expression_names, fit_percent, fit_servo_model,
+from .servo_fit import (ServoModelFit, dwell_cost, expression_names, fit_percent, fit_servo_model,
                         lag1, linear_starts, measured_noise, trace_group)
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
 
-__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection", "cross_validate", "effect_px",
-           "select_servo_model"]
+__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection", "check_held_names",
+           "cross_validate", "effect_px", "select_servo_model"]
 
 #: BIC a nonlinear structure must gain over the linear model to be selected.
 BIC_MARGIN = 10.0
@@ -107,6 +107,20 @@ def _information(fits: list[ServoModelFit]) -> float:
     return scale
 
 
+def check_held_names(structures, fix: dict, bounds: dict, ties: dict, who: str) -> None:
+    """Raise ServoscopeError for a held, bounded or tied name (or one a tie uses) that none of ``structures``
+    has, with a did-you-mean; ``who`` names the models in the message."""
+    known = {*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in structures if s in NONLINEAR_PARAMETER)}
+    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
+        if name not in known:
+            import difflib
+
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            raise ServoscopeError(f"no model of {who} has a parameter {name!r}"
+                                  + (f" (did you mean {close[0]!r}?)" if close else "")
+                                  + f"; the parameters: {', '.join(sorted(known))}")
+
+
 def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | list[str], *,
                        start: dict[str, float] | None = None, fix: dict[str, float] | None = None,
                        ties: dict[str, str] | None = None,
@@ -147,10 +161,7 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
         own = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(structure)}
         return {k: v for k, v in d.items() if k in own and (not isinstance(v, str) or expression_names(v) <= own)}
 
-    known = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER}
-    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
-        if name not in known:
-            check_servo_held(tried[-1], {name: 0.0}, None)  # its did-you-mean
+    check_held_names(tried, fix, bounds, ties, "the models tried")
     sigma = measured_noise(traces)
     # The linear model from the given start (the frequency-domain fit's) and from a coarse grid, so
     # that a frequency-domain fit gone wrong (a strongly nonlinear servo) does not decide the rest.
