@@ -17,6 +17,9 @@ LED_COLOUR = "#ffd400"
 #: The twin's reference stickers on the airframe (tab:pink, tab:cyan): hues far from the blade's
 #: stickers, the LED and the background. Real campaigns name their own.
 REFERENCE_COLOURS = ("#e377c2", "#17becf")
+#: The twin's extra stickers along the blade (tab:blue, tab:purple), in the order ``extra_stickers``
+#: takes them: hues far from the lead, trail, LED and reference stickers. Real campaigns name their own.
+EXTRA_COLOURS = ("#1f77b4", "#9467bd")
 
 # -- sysid: when a dwell or a fit earns a warning ------------------------------------------------
 #: Sinusoidal fidelity (share of the output's AC power in the fitted sine) below this flags a

@@ -96,6 +96,13 @@ class TrackerSettings:
         out camera roll and shake, a phone's stabilisation and the airframe's
         own rocking (:attr:`Track.reference_angle_rad` keeps that line's
         motion). None (the default): against the image's axes.
+    extra : tuple of str
+        More stickers on the blade, each its own colour (``"#rrggbb"`` or a CSS
+        name): the blade's rigid motion is fitted to all markers (the angle
+        its rotation) and each marker's residual across the chord line is its
+        bending (see :func:`servoscope.angle.rigid_motion`). Tracked two at a
+        time by passes of their own over the video. Empty (the default): two
+        markers, tracked as always.
     """
 
     lead: str = LEAD_COLOUR
@@ -115,6 +122,7 @@ class TrackerSettings:
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
     reference: tuple[str, str] | None = None
+    extra: tuple[str, ...] = ()
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")

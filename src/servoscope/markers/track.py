@@ -10,7 +10,12 @@ import numpy as np
 from ..errors import ServoscopeError
 from .error_analysis import angle_error_analysis
 
-__all__ = ["Track"]
+__all__ = ["Track", "marker_names"]
+
+
+def marker_names(n_extra: int) -> list[str]:
+    """The markers' names in a track's column order: ``lead``, ``trail``, ``extra1`` … ``extra<n_extra>``."""
+    return ["lead", "trail", *(f"extra{k + 1}" for k in range(n_extra))]
 
 
 @dataclass
@@ -80,6 +85,19 @@ class Track:
         Frames the codec coded on their own (I-frames; every frame of
         uncompressed video); None when unknown. ``fit_sine`` checks the
         other frames' sine against theirs (the codec check).
+    extra_colours : tuple of str
+        The extra markers' colours as given (``TrackerSettings.extra``); empty
+        with two markers, and then every ``extra_*`` and ``bending_px`` field is None.
+    extra_xy_px : ndarray, shape (n, k, 2) or None
+        The extra markers' centroids; NaN where not found.
+    extra_sigma_px : ndarray, shape (n, k) or None
+        Their centroid uncertainty (px).
+    bending_px : ndarray, shape (n, 2 + k) or None
+        Each marker's (lead, trail, extras) distance across the chord line
+        through the lead and trail markers from its place on the blade (the
+        median over the track; px, up positive; see
+        :func:`servoscope.angle.rigid_motion`); NaN where invalid. The lead's
+        and trail's are 0: they define the line.
     """
 
     video: str
@@ -110,6 +128,10 @@ class Track:
     lead_shape_px2: np.ndarray | None = None
     trail_shape_px2: np.ndarray | None = None
     reference_angle_rad: np.ndarray | None = None
+    extra_colours: tuple[str, ...] = ()
+    extra_xy_px: np.ndarray | None = None
+    extra_sigma_px: np.ndarray | None = None
+    bending_px: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -200,7 +222,21 @@ class Track:
             "angle_time_s": self.angle_time_s,
             **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
             **({} if self.reference_angle_rad is None else {"reference_angle_rad": self.reference_angle_rad}),
+            **self._extra_columns(),
         }
+
+    def _extra_columns(self) -> dict[str, np.ndarray]:
+        """Extra markers' centroids (``extra1_x_px`` …) and every marker's bending, when there are extra markers."""
+        if self.extra_xy_px is None or self.bending_px is None:
+            return {}
+        cols: dict[str, np.ndarray] = {}
+        for k in range(self.extra_xy_px.shape[1]):
+            cols[f"extra{k + 1}_x_px"] = self.extra_xy_px[:, k, 0]
+            cols[f"extra{k + 1}_y_px"] = self.extra_xy_px[:, k, 1]
+            cols[f"extra{k + 1}_sigma_px"] = self.extra_sigma_px[:, k]
+        for k, name in enumerate(marker_names(len(self.extra_colours))):
+            cols[f"{name}_bending_px"] = self.bending_px[:, k]
+        return cols
 
     def to_pandas(self):
         """The per-frame table as a pandas DataFrame (pandas is optional)."""
@@ -268,6 +304,7 @@ class Track:
             angle_time_s=num("angle_time_s"),
             intra=None if "intra" not in cols else np.array([v == "1" for v in cols["intra"]], dtype=bool),
             reference_angle_rad=num("reference_angle_rad"),
+            **_extra_from_columns(num, len(rows)),
         )
 
     def to_csv(self, path: str | Path) -> None:
@@ -288,3 +325,24 @@ class Track:
             row.append(self.reason[i].replace(",", ";"))
             lines.append(",".join(row))
         Path(path).write_text("\n".join(lines) + "\n")
+
+
+def _extra_from_columns(num, n_rows: int) -> dict:
+    """A track table's extra markers' columns back as :class:`Track` fields (none without extra markers).
+
+    The table does not hold their colours: they come back as ``""`` (a result's loader knows them).
+    """
+    k = 0
+    while num(f"extra{k + 1}_x_px") is not None:
+        k += 1
+    if k == 0:
+        return {}
+    names = marker_names(k)
+    out = {
+        "extra_colours": ("",) * k,
+        "extra_xy_px": np.stack([np.stack([num(f"extra{j + 1}_x_px"), num(f"extra{j + 1}_y_px")], axis=1)
+                                 for j in range(k)], axis=1).reshape(n_rows, k, 2),
+        "extra_sigma_px": np.stack([num(f"extra{j + 1}_sigma_px") for j in range(k)], axis=1).reshape(n_rows, k),
+        "bending_px": np.stack([num(f"{name}_bending_px") for name in names], axis=1).reshape(n_rows, k + 2),
+    }
+    return out

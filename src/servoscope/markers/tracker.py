@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from ..angle.geometry import angle_rad_from_centroids, blade_angle
+from ..angle.rigid import rigid_motion
 from ..camera.rolling_shutter import angle_sample_times, check_readout
 from ..camera.undistort import undistort_centroids
 from ..errors import ServoscopeError
@@ -84,6 +85,7 @@ def track_video(
         # keeps to it too, as the decoder does (see video.reader.thread_budget).
         cv2.setNumThreads(budget)
     info = probe_video(path)
+    _check_extra(settings)
     lead_spec = parse_colour(settings.lead, what="lead marker colour")
     trail_spec = parse_colour(settings.trail, what="trail marker colour")
     led_spec = parse_colour(settings.led, what="LED colour") if settings.led else None
@@ -118,6 +120,8 @@ def track_video(
     if progress is not None:
         progress(len(log))
     track = _finish(path, settings, info, fields, led_spec, log)
+    if settings.extra:
+        track = _with_extras(path, settings, track)
     if settings.reference is not None:
         track = _against_reference(path, settings, track)
     return track
@@ -179,6 +183,119 @@ def _against_reference(path: Path, settings: TrackerSettings, track: Track) -> T
     return replace(track, angle_rad=np.where(valid, track.angle_rad - motion, np.nan), valid=valid, reason=reasons,
                    angle_sigma_rad=np.hypot(track.angle_sigma_rad, ref.angle_sigma_rad), warnings=warnings,
                    reference_angle_rad=np.where(ref.valid, motion, np.nan))
+
+
+def _check_extra(settings: TrackerSettings) -> None:
+    """Refuse extra markers that cannot be told apart: not a colour, or another marker's colour."""
+    named = {"lead": settings.lead, "trail": settings.trail, **({"LED": settings.led} if settings.led else {}),
+             **({f"reference {i + 1}": c for i, c in enumerate(settings.reference or ())})}
+    seen: dict[tuple, str] = {}
+    for name, colour in named.items():
+        spec = parse_colour(colour, what=f"{name} colour") if colour not in ("auto",) else None
+        if isinstance(spec, tuple):
+            seen[tuple(round(float(c)) for c in spec)] = name
+    for k, colour in enumerate(settings.extra):
+        what = f"extra marker {k + 1} ({colour})"
+        spec = parse_colour(colour, what=f"{what} colour")
+        if not isinstance(spec, tuple):
+            raise ServoscopeError(f"{what}: extra markers are told by colour; give \"#rrggbb\" or a CSS name, "
+                                  f"not {colour!r}")
+        key = tuple(round(float(c)) for c in spec)
+        if key in seen:
+            raise ServoscopeError(f"{what} has the {seen[key]}'s colour: give each marker a colour of its own")
+        seen[key] = f"extra marker {k + 1}"
+
+
+def _as_extra(text: str, names: tuple[str, str]) -> str:
+    """A message about an extra-marker pass, its two markers named as the user named them."""
+    return text.replace("lead marker", names[0]).replace("trail marker", names[1])
+
+
+#: An extra marker whose residual from the blade's rigid motion exceeds this many of its robust
+#: spreads (and :data:`EXTRA_JUMP_MIN_PX`) in a frame is taken as a wrong blob there.
+EXTRA_JUMP_SPREADS = 8.0
+EXTRA_JUMP_MIN_PX = 2.0
+
+
+def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
+    """Track the extra markers and fit the blade's rigid motion to all markers (:func:`~servoscope.angle.rigid_motion`).
+
+    The extra markers are tracked two at a time by passes of their own over the video,
+    each pair as a pair of markers (colour models, sub-pixel moments, rigid check); an
+    odd one out is paired with the lead marker (pinned where the first pass pinned it).
+    A frame is valid when every marker is; the motion is fitted to the lead and trail
+    markers (the chord line: the angle and the heave stay the two-marker ones), and each
+    marker's residual across that line is its bending. A pass that finds an extra
+    marker where the lead or trail marker is (a colour that matched theirs) is refused.
+    """
+    extras = list(settings.extra)
+    n = track.n_frames
+    xy = np.full((n, len(extras), 2), np.nan)
+    sigma = np.full((n, len(extras)), np.nan)
+    valid = track.valid.copy()
+    reasons = list(track.reason)
+    warnings = list(track.warnings)
+    base = replace(settings, led=None, reference=None, extra=(), lead_near=None, trail_near=None)
+    for start in range(0, len(extras), 2):
+        ks = list(range(start, min(start + 2, len(extras))))
+        names = tuple(f"extra marker {k + 1} ({extras[k]})" for k in ks)
+        if len(ks) == 2:
+            pass_settings = replace(base, lead=extras[ks[0]], trail=extras[ks[1]])
+            names_in_pass = names
+        else:
+            pass_settings = replace(base, lead=settings.lead, lead_near=settings.lead_near, trail=extras[ks[0]])
+            names_in_pass = ("lead marker", names[0])
+        try:
+            got = track_video(path, pass_settings)
+        except ServoscopeError as exc:
+            raise ServoscopeError(_as_extra(str(exc), names_in_pass)) from None
+        if got.n_frames != n:  # pragma: no cover - one decoder, one video
+            raise ServoscopeError(f"{path}: the extra markers' pass decoded {got.n_frames} frames, the blade's {n}")
+        columns = ([got.lead_xy_px, got.trail_xy_px], [got.lead_sigma_px, got.trail_sigma_px]) if len(ks) == 2 \
+            else ([got.trail_xy_px], [got.trail_sigma_px])
+        for k, pos, sig in zip(ks, *columns):
+            xy[:, k], sigma[:, k] = pos, sig
+        for i in np.flatnonzero(track.valid & ~got.valid):
+            valid[i] = False
+            reasons[i] = reasons[i] or _as_extra(got.reason[i] or "not measured", names_in_pass)
+        warnings += [_as_extra(w, names_in_pass) for w in got.warnings
+                     if not w.startswith(("LED", "no LED"))]
+    _refuse_coinciding(path, track, xy, extras)
+    points = np.concatenate([track.lead_xy_px[:, None], track.trail_xy_px[:, None], xy], axis=1)
+    sig = np.concatenate([track.lead_sigma_px[:, None], track.trail_sigma_px[:, None], sigma], axis=1)
+    fit = rigid_motion(points, sig, valid, fit_markers=2)
+    # A wrong blob in a frame (an extra marker's colour met elsewhere) leaves it off the rigid motion.
+    resid = np.hypot(fit.bending_px, fit.along_px)
+    spread = 1.4826 * np.nanmedian(np.abs(resid - np.nanmedian(resid, axis=0)), axis=0)
+    jumped = np.any(resid > np.maximum(EXTRA_JUMP_MIN_PX, np.nanmedian(resid, axis=0) + EXTRA_JUMP_SPREADS * spread),
+                    axis=1)
+    if jumped.any():
+        for i in np.flatnonzero(jumped):
+            valid[i] = False
+            reasons[i] = reasons[i] or "a marker left the blade's rigid motion (wrong blob?)"
+        warnings.append(f"{int(jumped.sum())} frames had a marker off the blade's rigid motion by more than "
+                        f"{EXTRA_JUMP_MIN_PX:g} px and {EXTRA_JUMP_SPREADS:g} spreads: left out")
+        fit = rigid_motion(points, sig, valid, fit_markers=2)
+    if not valid.any():
+        warnings.append("no frame has every marker")
+    # The pitch and its uncertainty stay the chord line's (the fit's own, bit for bit): only frames change.
+    return replace(track, angle_rad=np.where(valid, track.angle_rad, np.nan),
+                   angle_sigma_rad=np.where(valid, track.angle_sigma_rad, np.nan), valid=valid, reason=reasons,
+                   warnings=warnings, extra_colours=tuple(extras), extra_xy_px=xy, extra_sigma_px=sigma,
+                   bending_px=fit.bending_px)
+
+
+def _refuse_coinciding(path: Path, track: Track, xy: np.ndarray, extras: list[str]) -> None:
+    """Refuse an extra marker found where the lead or trail marker is: its colour matched theirs, not a sticker."""
+    for k, colour in enumerate(extras):
+        for name, other, area in (("lead", track.lead_xy_px, track.lead_area_px),
+                                  ("trail", track.trail_xy_px, track.trail_area_px)):
+            gap = np.nanmedian(np.hypot(*(xy[:, k] - other).T)) if np.isfinite(xy[:, k]).any() else np.inf
+            radius = np.sqrt(np.nanmedian(area) / np.pi) if np.isfinite(area).any() else 1.0
+            if gap < 2.0 * radius:
+                raise ServoscopeError(f"{path}: extra marker {k + 1} ({colour}) was found on the {name} marker "
+                                      f"({gap:.1f} px from it): its colour matches the {name}'s; give a colour the "
+                                      "other stickers do not have (check with `servoscope markers`)")
 
 
 def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str | None, led_spec,

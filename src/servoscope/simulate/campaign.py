@@ -168,7 +168,9 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     lead, trail = scene.sticker_centres_px(pitch)
     angle = marker_angle_rad(lead, trail)
     led = led_exposure_fraction(time_s, signal.t0_s, preset.exposure_s)
-    renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed)
+    renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed,
+                             mode_shape=_shape_along_chord(preset, scene) if preset.blade_mode_bend else None)
+    extra_xy = scene.to_image(scene.extra_centres_uv(), pitch) if scene.extra_stickers else None
     rolling: dict = {}
     if preset.readout_s > 0:
         # Each row is exposed around its own time; the stickers and the LED
@@ -235,6 +237,8 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         "pitch_at_frame_time_rad": pitch_instant.tolist(),
         "lead_xy_px": lead.tolist(),
         "trail_xy_px": trail.tolist(),
+        # The extra stickers' centres at the pitch alone (shape (frames, k, 2)), as lead's and trail's.
+        **({"extra_xy_px": extra_xy.tolist()} if extra_xy is not None else {}),
         "led_level": led.tolist(),
         **rolling,
         **({"shake_xy_px": shake.tolist()} if preset.shake_px > 0 else {}),
@@ -244,6 +248,29 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
+
+
+def _shape_along_chord(preset: CampaignPreset, scene: Scene) -> Callable[[np.ndarray], np.ndarray]:
+    """The blade mode's share of the heave at chord coordinate u (blade frame, px).
+
+    ``1 − 4·bend·f·(1 − f)``, f the place's position from the trail sticker (0) to the lead (1)
+    along the chord: the lead and trail stickers move with the heave, the blade between them
+    less (``blade_mode_bend``), beyond them more.
+    """
+    lead, trail = scene.sticker_centres_uv()
+    bend = preset.blade_mode_bend
+
+    def share(u: np.ndarray) -> np.ndarray:
+        f = (np.asarray(u, dtype=np.float64) - trail[0]) / (lead[0] - trail[0])
+        return 1.0 - 4.0 * bend * f * (1.0 - f)
+    return share
+
+
+def mode_shape(preset: CampaignPreset, scene: Scene) -> tuple[float, ...]:
+    """The blade mode's share of the heave at each sticker's centre: lead, trail, then the extra stickers."""
+    share = _shape_along_chord(preset, scene)
+    centres = [*scene.sticker_centres_uv(), *scene.extra_centres_uv()]
+    return tuple(float(share(np.array([c[0]]))[0]) for c in centres)
 
 
 def blade_heave_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
@@ -385,6 +412,9 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
     if p.reference_stickers:
         scene = replace(scene, clutter=tuple(scene.clutter) + reference_stickers(scene))
+    if p.monochrome and scene.extra_stickers:
+        raise ServoscopeError("extra_stickers are told by colour: the twin's monochrome camera films two white dots "
+                              "(leave out extra_stickers or monochrome)")
     if p.monochrome and "lead_colour" not in scene_kw and "trail_colour" not in scene_kw:
         # White dots on the dark blade: what a monochrome camera's users stick on.
         scene = replace(scene, lead_colour="#f4f4f4", trail_colour="#f4f4f4")
@@ -464,15 +494,24 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                           "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
                                           "reference_stickers", "monochrome", "sine_amplitudes",
                                           "blade_mode_hz", "blade_mode_damping", "blade_mode_px_per_rad",
-                                          "bit_depth")
+                                          "blade_mode_bend", "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
+        **({"extra_stickers": [{"colour": c, "position": f} for c, f in scene.extra_stickers]}
+           if scene.extra_stickers else {}),
         **({"modes": [{"frequency_hz": p.blade_mode_hz, "damping_ratio": p.blade_mode_damping,
-                       "heave_px_per_rad": p.blade_mode_px_per_rad}]} if p.blade_mode_hz > 0 else {}),
+                       "heave_px_per_rad": p.blade_mode_px_per_rad,
+                       **({"shape": _shape_truth(p, scene)} if scene.extra_stickers or p.blade_mode_bend else {})}]}
+           if p.blade_mode_hz > 0 else {}),
         "input_units": p.input_units,
         "tests": tests,
     }
+
+
+def _shape_truth(p: CampaignPreset, scene: Scene) -> dict:
+    shape = mode_shape(p, scene)
+    return {"lead": shape[0], "trail": shape[1], "extra": list(shape[2:])}
 
 
 def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fps: Fraction | None = None) -> str:
@@ -495,6 +534,7 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
         f"led = {_toml_str('bright' if p.monochrome else scene.led_colour)}",
         *([f"reference = [{_toml_str(REFERENCE_COLOURS[0])}, {_toml_str(REFERENCE_COLOURS[1])}]"]
           if p.reference_stickers else []),
+        *([f"extra = [{', '.join(_toml_str(c) for c, _ in scene.extra_stickers)}]"] if scene.extra_stickers else []),
         "",
         "[input]",
         f"units = {_toml_str(p.input_units)}",

@@ -145,6 +145,13 @@ class CampaignPreset:
         by q px (heave; the stickers with it, so the angle is unchanged). 0 Hz
         (the default): a rigid blade. Global shutter, no motion blur. Truth lists
         the mode (``modes``) and each test's ``heave_px``.
+    blade_mode_bend : float
+        The mode bends the blade along the stickers' line: a sticker at position
+        f of the way from the trail sticker (0) to the lead (1) moves
+        ``1 − 4·bend·f·(1 − f)`` of the heave (the lead and trail stickers all of
+        it, a sticker halfway ``1 − bend``), seen by extra stickers
+        (``extra_stickers``, a :class:`~servoscope.simulate.Scene` setting); truth's
+        mode lists its ``shape`` at each sticker. 0 (the default): a rigid blade's mode.
     sine_amplitudes : tuple of float or None
         Amplitude as a test axis: a dwell at every frequency for each of these
         input amplitudes (frequency by frequency), instead of ``sine_amplitude``
@@ -214,6 +221,7 @@ class CampaignPreset:
     blade_mode_hz: float = 0.0
     blade_mode_damping: float = 0.03
     blade_mode_px_per_rad: float = 40.0
+    blade_mode_bend: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_camera_options()
@@ -259,8 +267,9 @@ class CampaignPreset:
         if self.frames_format not in (None, "tiff16"):
             raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
         if not (math.isfinite(self.blade_mode_hz) and self.blade_mode_hz >= 0
-                and 0 < self.blade_mode_damping < 1 and math.isfinite(self.blade_mode_px_per_rad)):
-            raise ServoscopeError("blade_mode_hz must be >= 0 and blade_mode_damping in (0, 1)")
+                and 0 < self.blade_mode_damping < 1 and math.isfinite(self.blade_mode_px_per_rad)
+                and math.isfinite(self.blade_mode_bend)):
+            raise ServoscopeError("blade_mode_hz must be >= 0, blade_mode_damping in (0, 1) and blade_mode_bend finite")
         if self.blade_mode_hz > 0 and (self.readout_s > 0 or self.motion_blur):
             raise ServoscopeError("a flapping blade (blade_mode_hz > 0) is rendered with a global shutter and no "
                                   "motion blur")

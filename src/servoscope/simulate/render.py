@@ -21,6 +21,8 @@ import math
 from dataclasses import replace
 
 import cv2
+from collections.abc import Callable
+
 import numpy as np
 import scipy.special
 
@@ -178,10 +180,17 @@ class FrameRenderer:
     noise_seed : int
         Seed of the noise; frame ``i``'s noise depends only on
         ``(noise_seed, i)``.
+    mode_shape : callable, optional
+        The blade mode's shape along the chord: ``mode_shape(u)`` (u the blade
+        frame's chord coordinate, px) is how far a point there moves across
+        the chord per px of ``heave_px`` (a bending mode). The blade's outline
+        and the LED bend with it, each sticker moves whole by its centre's
+        share. None: 1 everywhere (the whole blade heaves).
     """
 
     def __init__(self, scene: Scene, camera: CameraModel | None = None, *,
-                 noise_sigma_dn: float = 1.5, noise_seed: int = 0) -> None:
+                 noise_sigma_dn: float = 1.5, noise_seed: int = 0,
+                 mode_shape: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         if camera is not None and tuple(camera.image_size) != (scene.width, scene.height):
             raise ServoscopeError(
                 f"camera image size {camera.image_size} differs from the scene's {(scene.width, scene.height)}")
@@ -203,8 +212,10 @@ class FrameRenderer:
         unit = np.stack([np.cos(ang), np.sin(ang)], axis=1)
         rl = 0.5 * scene.led_diameter_px
         sticker = scene.sticker_outline_uv()
-        self._parts_uv = [scene.blade_outline_uv(), lead_uv + sticker, trail_uv + sticker]
-        self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour)]
+        self._parts_uv = [scene.blade_outline_uv(), lead_uv + sticker, trail_uv + sticker,
+                          *(c + sticker for c in scene.extra_centres_uv())]
+        self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour,
+                                                  *(c for c, _ in scene.extra_stickers))]
         if scene.led_offset_px != 0:
             # An LED off the chord sits in a dark housing (the blade's colour) on
             # a bracket, as on the blade itself: a tracker that reads the LED's
@@ -214,18 +225,33 @@ class FrameRenderer:
         self._parts_uv.append(scene.led_centre_uv() + rl * unit)
         self._splits = np.cumsum([len(p) for p in self._parts_uv])[:-1]
         self._all_uv = np.concatenate(self._parts_uv, axis=0)
+        # How far each vertex moves per px of the mode's heave: a sticker (a stiff patch) by its
+        # centre's share, everything else by its own place's.
+        self._heave_share: np.ndarray | None = None
+        if mode_shape is not None:
+            centres = [lead_uv, trail_uv, *scene.extra_centres_uv()]
+            share = [np.asarray(mode_shape(p[:, 0]), dtype=np.float64) for p in self._parts_uv]
+            for k, c in enumerate(centres):
+                share[1 + k] = np.full(len(self._parts_uv[1 + k]), float(mode_shape(np.array([c[0]]))[0]))
+            self._heave_share = np.concatenate(share)
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
     def outlines_px(self, pitch_rad: float, airframe: np.ndarray | None = None,
                     heave_px: float = 0.0) -> list[np.ndarray]:
-        """Recorded (distorted) outlines of blade, lead sticker, trail sticker, (LED housing,) LED.
+        """Recorded (distorted) outlines of blade, lead sticker, trail sticker, extra stickers, (LED housing,) LED.
 
         ``airframe`` (2×3, :func:`airframe_motion`) turns them with the airframe, in the
         ideal image (before the lens), as the airframe turns in the world. ``heave_px``
         moves the whole blade across its chord (the blade flapping, up positive).
         """
-        uv = self._all_uv if heave_px == 0.0 else self._all_uv + np.array([0.0, heave_px])
+        if heave_px == 0.0:
+            uv = self._all_uv
+        elif self._heave_share is None:
+            uv = self._all_uv + np.array([0.0, heave_px])
+        else:
+            uv = self._all_uv.copy()
+            uv[:, 1] += heave_px * self._heave_share
         xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)

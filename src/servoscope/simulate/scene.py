@@ -254,6 +254,11 @@ class Scene:
     max_segment_px : float
         Longest polygon edge before lens distortion (edges are densified so
         that the distorted outline follows the lens's curves).
+    extra_stickers : tuple of (str, float)
+        More stickers on the blade (issue 18's ``[markers] extra``), each
+        ``(colour, position)``: its centre on the lead and trail stickers' line,
+        at ``position`` of the way from the trail sticker (0) to the lead (1);
+        the shape and size of the others'. Empty (the default): two stickers.
     """
 
     width: int = 720
@@ -283,8 +288,13 @@ class Scene:
     clutter: tuple[Clutter, ...] = ()
     sticker_shape: str = "disc"
     sticker_aspect: float | None = None
+    extra_stickers: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
+        extras = tuple((str(c), float(f)) for c, f in self.extra_stickers)
+        object.__setattr__(self, "extra_stickers", extras)
+        if any(not math.isfinite(f) for _, f in extras):
+            raise ServoscopeError("scene: extra_stickers' positions must be finite")
         if self.width < 2 or self.height < 2:
             raise ServoscopeError(f"scene: image size {self.width}x{self.height} is too small")
         if self.sticker_vertices < 128:
@@ -301,6 +311,8 @@ class Scene:
         for name in ("blade_colour", "lead_colour", "trail_colour", "led_colour", "led_off_colour",
                      "background_top", "background_bottom"):
             colour_rgb(getattr(self, name))  # validates
+        for colour, _ in self.extra_stickers:
+            colour_rgb(colour)
         object.__setattr__(self, "pivot_xy_px", (float(self.pivot_xy_px[0]), float(self.pivot_xy_px[1])))
         items = (self.clutter,) if isinstance(self.clutter, (Clutter, dict)) else tuple(self.clutter)
         try:
@@ -366,6 +378,11 @@ class Scene:
         half = 0.5 * self.sticker_separation_px
         d = np.array([math.cos(self.sticker_offset_rad), math.sin(self.sticker_offset_rad)])
         return mid + half * d, mid - half * d
+
+    def extra_centres_uv(self) -> np.ndarray:
+        """The extra stickers' centres in the blade frame, shape (k, 2) (k = ``len(extra_stickers)``)."""
+        lead, trail = self.sticker_centres_uv()
+        return np.array([trail + f * (lead - trail) for _, f in self.extra_stickers]).reshape(-1, 2)
 
     def led_centre_uv(self) -> np.ndarray:
         """LED centre in the blade frame."""
