@@ -211,10 +211,13 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
 @click.option("--reference", metavar="COLOUR,COLOUR",
               help="Two stickers on the airframe: the angle is measured against the line joining them "
                    "(takes out camera roll and shake, a phone's stabilisation, the airframe's rocking).")
+@click.option("--extra", "extra", metavar="COLOUR", multiple=True,
+              help="Another sticker on the blade (repeat for more), each its own colour: the track gets each "
+                   "marker's bending across the lead–trail line.")
 @_frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
           readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
-          reference: str | None, **source) -> None:
+          reference: str | None, extra: tuple[str, ...], **source) -> None:
     """Track the two markers through VIDEO and write the per-frame angles.
 
     VIDEO is a video file, a folder or quoted glob of TIFF/PNG/JPEG frames
@@ -253,7 +256,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
                                lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
-                               reference=reference_pair)
+                               reference=reference_pair, extra=tuple(extra))
     result = track_video(video, settings)
     from .video.reader import probe_video
 

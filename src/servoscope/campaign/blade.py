@@ -8,25 +8,31 @@ blade that flaps moves the line across itself.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from ..angle.pivot import heave_px, pivot_motion
+from ..markers.track import marker_names
 from ..markers.tracker import Track
 from ..sysid import SineFit
-from ..sysid.heave import HeaveRow, dwell_heave
-from ..sysid.modes import ModeFit, fit_damped_mode, pool_modes
+from ..sysid.heave import HEAVE_SYSTEMATIC_PX, HeaveModel, HeaveRow, dwell_heave, fit_heave_model
+from ..sysid.modes import ModeFit, fit_damped_mode, fit_mode_shape, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["HEAVE_MIN_Z", "axis_of", "blade_modes", "dwell_modes", "heave_response"]
+__all__ = ["HEAVE_MIN_Z", "axis_of", "bending_response", "blade_modes", "dwell_modes", "heave_model",
+           "heave_response"]
 
 #: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
 HEAVE_MIN_Z = 5.0
 
 
-def blade_modes(step, track: Track | None, model, pivot) -> list[ModeFit]:
+def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str] = ("", "")) -> list[ModeFit]:
     """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
+
+    With extra markers the mode gets its shape (:func:`~servoscope.sysid.modes.fit_mode_shape`):
+    each marker's ring-down across the chord line; ``colours`` are the lead's and trail's.
 
     The heave is the markers' line's distance from the pitch axis
     (:func:`servoscope.angle.heave_px`); the free motion starts when the servo has
@@ -46,7 +52,16 @@ def blade_modes(step, track: Track | None, model, pivot) -> list[ModeFit]:
     decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
     settled += 4.0 / decay if decay > 0 else 0.2
     mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
-    return [] if mode is None else [mode]
+    if mode is None:
+        return []
+    if track.bending_px is not None:
+        # Which markers move in it: each one's distance across the chord line (the line's heave
+        # plus its own bending), its ring-down at the mode's frequency and damping.
+        shape = fit_mode_shape(track.angle_time_s, heave[:, None] + track.bending_px, t0_s + settled, mode,
+                               tuple(marker_names(len(track.extra_colours))), (*colours, *track.extra_colours),
+                               systematic_px=HEAVE_SYSTEMATIC_PX)
+        mode = replace(mode, shape=shape)
+    return [mode]
 
 
 def axis_of(tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None):
@@ -114,3 +129,42 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     if not any(r.gain >= HEAVE_MIN_Z * r.gain_stderr for r in rows):
         return []
     return rows
+
+
+def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit]) -> list[HeaveRow]:
+    """Each extra marker's bending at each fitted dwell's input frequency (px per input unit, phase).
+
+    A marker's bending is its distance across the lead–trail chord line from where it rests
+    (:attr:`~servoscope.markers.Track.bending_px`); fitted as the heave is
+    (:func:`~servoscope.sysid.heave.dwell_heave`), one row per marker and dwell. Empty
+    without extra markers; with them, every row, measured or not (its error says which).
+    """
+    rows = []
+    for test in campaign.sine_tests:
+        fit, track = fits.get(test.label), tracks.get(test.label)
+        t0 = None if track is None else input_start(test, track)
+        if fit is None or t0 is None or track.bending_px is None:
+            continue
+        names = marker_names(len(track.extra_colours))
+        for k, colour in enumerate(track.extra_colours):
+            row = dwell_heave(track.angle_time_s, track.bending_px[:, 2 + k], test.frequency_hz, t0, test.amplitude,
+                              fit.window_s, test.label, names[2 + k], colour or campaign.extra[k])
+            if row is not None:
+                rows.append(row)
+    return rows
+
+
+def heave_model(campaign: Campaign, rows: list[HeaveRow], fits: dict[str, SineFit],
+                modes: list[ModeFit]) -> HeaveModel | None:
+    """The flapping frequency response fitted (:func:`~servoscope.sysid.heave.fit_heave_model`): each dwell's
+    heave over its pitch, started from the first mode found (the step's) when there is one; None when the
+    dwells cannot tell it."""
+    if not rows:
+        return None
+    pitch = {}
+    for test in campaign.sine_tests:
+        fit = fits.get(test.label)
+        if fit is not None and fit.phase_rad is not None and test.amplitude:
+            a = abs(test.amplitude)
+            pitch[test.label] = (fit.amplitude / a, fit.amplitude_stderr / a, fit.phase_rad, fit.phase_stderr_rad or 0.0)
+    return fit_heave_model(rows, pitch, modes[0].frequency_hz if modes else None)

@@ -28,7 +28,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model"}
 _MODEL_KEYS = {"fix", "bound", "tie"}
 _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
-_MARKER_KEYS = {"lead", "trail", "led", "reference"}
+_MARKER_KEYS = {"lead", "trail", "led", "reference", "extra"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
 _TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "t0_s", "label"}
@@ -94,6 +94,9 @@ class Campaign:
     reference : (str, str) or None
         Two stickers on the airframe (``[markers] reference = ["#…", "#…"]``):
         the blade's angle is measured against the line joining them.
+    extra : tuple of str
+        More stickers along the blade (``[markers] extra = ["#…", …]``), each its
+        own colour: each marker's bending across the lead–trail line.
     model_fix, model_bounds : dict
         Model parameters held at a value or within limits (``[model] fix =
         {damping_ratio = 0.8}``, ``bound = {natural_frequency_rad_s = [20, 80]}``).
@@ -117,6 +120,7 @@ class Campaign:
     trail_near: tuple[float, float] | None = None
     timestamp: str = "middle"
     reference: tuple[str, str] | None = None
+    extra: tuple[str, ...] = ()
     model_fix: dict[str, float] = field(default_factory=dict)
     model_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     model_ties: dict[str, str] = field(default_factory=dict)
@@ -196,6 +200,42 @@ class _Problems:
             self.add(name, "must be a table")
             return {}
         return value
+
+
+def _extra_markers(markers_t: dict, colours: dict, reference, problems) -> tuple[str, ...]:
+    """``[markers] extra``: colours of more stickers on the blade, each its own and none another marker's."""
+    if "extra" not in markers_t:
+        return ()
+    extra = markers_t["extra"]
+    if not (isinstance(extra, list) and extra and all(isinstance(c, str) for c in extra)):
+        problems.add("markers.extra", "the colours of more stickers on the blade: extra = [\"#rrggbb\", ...]")
+        return ()
+    taken = {k: colours.get(k) for k in ("lead", "trail", "led")}
+    taken.update({f"reference[{i}]": c for i, c in enumerate(reference or ())})
+    seen: dict[tuple, str] = {}
+    for name, colour in taken.items():
+        try:
+            spec = parse_colour(colour, what="colour") if isinstance(colour, str) else None
+        except ServoscopeError:
+            continue
+        if isinstance(spec, tuple):
+            seen[tuple(round(float(c)) for c in spec)] = name
+    for i, colour in enumerate(extra):
+        try:
+            spec = parse_colour(colour, what="colour")
+        except ServoscopeError as exc:
+            problems.add(f"markers.extra[{i}]", str(exc).removeprefix("colour: "))
+            continue
+        if not isinstance(spec, tuple):
+            problems.add(f"markers.extra[{i}]", f"{colour!r}: extra markers are told by colour; give \"#rrggbb\" "
+                         "or a CSS name")
+            continue
+        key = tuple(round(float(c)) for c in spec)
+        if key in seen:
+            problems.add(f"markers.extra[{i}]", f"{colour} is also the {seen[key]}'s colour: give each sticker a "
+                         "colour of its own")
+        seen[key] = f"extra[{i}]"
+    return tuple(str(c) for c in extra)
 
 
 def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bool = False) -> Campaign:
@@ -331,6 +371,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
                     problems.add(f"markers.reference[{i}]", f"{colour} is also the {same[0]}'s colour: give the "
                                  "airframe's stickers colours of their own")
             reference = (str(ref[0]), str(ref[1]))
+
+    extra = _extra_markers(markers_t, colours, reference, problems)
 
     input_t = problems.table(data, "input")
     problems.unknown("input", input_t.keys(), _INPUT_KEYS)
@@ -499,6 +541,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         trail_near=near["trail"],
         timestamp=str(timestamp),
         reference=reference,
+        extra=extra,
         model_fix=model_fix,
         model_bounds=model_bounds,
         model_ties=model_ties,

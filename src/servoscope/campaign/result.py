@@ -21,7 +21,7 @@ from ..markers.track import Track
 from ..results import jsonable
 from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
 from ..sysid.linearity import AmplitudeCheck
-from ..sysid.heave import HeaveRow
+from ..sysid.heave import HeaveModel, HeaveRow
 from ..sysid.modes import ModeFit
 from ..sysid.servo_fit import fit_percent
 from ..sysid.servo_select import ServoModelSelection
@@ -81,7 +81,7 @@ def _loaded_campaign(data: dict, tests: list[TestSpec], path: Path, load_campaig
         return replace(base, tests=tuple(tests), skipped=skipped)
     return Campaign(path=manifest if data.get("campaign") else path, lead="", trail="", led=None, camera=None,
                     exposure_s=None, input_units=data.get("input_units", ""), settle_s=math.nan,
-                    tests=tuple(tests), skipped=skipped)
+                    tests=tuple(tests), skipped=skipped, extra=tuple(data.get("extra_markers", ())))
 
 
 def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
@@ -143,6 +143,12 @@ class IdentificationResult:
     heave_response : list of HeaveRow
         Each dwell's heave at its input frequency (:func:`servoscope.campaign.blade.heave_response`);
         empty when no dwell shows any (a rigid blade).
+    bending_response : list of HeaveRow
+        Each extra marker's bending at each dwell's input frequency
+        (:func:`servoscope.campaign.blade.bending_response`); empty with two markers.
+    heave_model : HeaveModel or None
+        The flapping frequency response fitted (heave over pitch as a mode,
+        :func:`servoscope.campaign.blade.heave_model`); its mode is also in ``modes``.
     """
 
     campaign: Campaign
@@ -160,6 +166,8 @@ class IdentificationResult:
     servo_model: ServoModelSelection | None = None
     predicted_step_fit_percent: float | None = None
     heave_response: list = field(default_factory=list)
+    bending_response: list = field(default_factory=list)
+    heave_model: HeaveModel | None = None
 
     @property
     def transfer_function(self):
@@ -257,6 +265,10 @@ class IdentificationResult:
                    if self.amplitude_checks else {}),
                 **({"modes": [m.summary() for m in self.modes]} if self.modes else {}),
                 **({"heave_response": [r.summary() for r in self.heave_response]} if self.heave_response else {}),
+                **({"bending_response": [r.summary() for r in self.bending_response]}
+                   if self.bending_response else {}),
+                **({"heave_model": self.heave_model.summary()} if self.heave_model is not None else {}),
+                **({"extra_markers": list(self.campaign.extra)} if self.campaign.extra else {}),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
                                                         **self._step_fits()},
@@ -395,6 +407,8 @@ class IdentificationResult:
             track = Track.from_csv(csv, video=entry["video"])
             track.t0_s, track.t0_uncertainty_s = entry.get("t0_s"), entry.get("t0_uncertainty_s")
             track.warnings = [w for w in entry.get("warnings", [])]
+            if track.extra_xy_px is not None and data.get("extra_markers"):
+                track.extra_colours = tuple(data["extra_markers"])  # the table holds their columns, not colours
             tracks[label] = track
             tests.append(TestSpec(video=Path(entry["video"]), kind=entry["kind"], amplitude=entry["amplitude"],
                                   frequency_hz=entry.get("frequency_hz"), label=label))
@@ -427,15 +441,16 @@ class IdentificationResult:
         exposure = None if data.get("exposure") is None else ExposureEstimate.from_summary(data["exposure"])
         shared = (data.get("dead_time", {}).get("phase") or {}).get("shared_t0_stderr_s") or 0.0
         checks = [AmplitudeCheck.from_summary(c) for c in data.get("gain_against_amplitude", [])]
-        modes = [ModeFit(m["frequency_hz"], m["stderr"]["frequency_hz"], m["damping_ratio"],
-                         m["stderr"]["damping_ratio"], m["amplitude"], m["source"]) for m in data.get("modes", [])]
+        modes = [ModeFit.from_summary(m) for m in data.get("modes", [])]
         td = data["model"].get("time_domain")
         selection = None if td is None else ServoModelSelection.from_summary(td)
         predicted = None if data.get("step") is None else data["step"].get("predicted_fit_percent")
         return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
                    list(data.get("warnings", [])), exposure, float(shared), checks, modes, selection,
                    predicted if selection is None else None,
-                   [HeaveRow.from_summary(r) for r in data.get("heave_response", [])])
+                   [HeaveRow.from_summary(r) for r in data.get("heave_response", [])],
+                   [HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
+                   None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]))
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

@@ -27,7 +27,7 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
-from .blade import axis_of, blade_modes, dwell_modes, heave_response
+from .blade import axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
@@ -49,6 +49,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         trail_near=campaign.trail_near,
         timestamp=campaign.timestamp,
         reference=campaign.reference,
+        extra=campaign.extra,
     )
 
 
@@ -511,10 +512,13 @@ def identify(
     # The pitch axis once, for the blade's mode (step and dwells) and its heave per dwell.
     step_track = tracks[step_label] if step_label else None
     pivot = axis_of(tracks, fits, step_track)
-    modes = blade_modes(step, step_track, model, pivot)
+    modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
     from_dwells = dwell_modes(campaign, tracks, fits, pivot, model)
     modes += [from_dwells] if from_dwells is not None else []
     heave = heave_response(campaign, tracks, fits, pivot)
+    bending = bending_response(campaign, tracks, fits)
+    flapping = heave_model(campaign, heave, fits, modes)
+    modes += [flapping.mode] if flapping is not None else []
     warned: list[float] = []
     for mode in modes:
         if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
@@ -539,4 +543,4 @@ def identify(
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)
     return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks, modes, selection, predicted, heave)
+                                amplitude_checks, modes, selection, predicted, heave, bending, flapping)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .figures import (amplitude_figure, bode_figure, candidate_traces_figure, describing_function_figure, dwell_figure,
+from .figures import (amplitude_figure, blade_frame_figure, bode_figure, candidate_traces_figure, describing_function_figure, dwell_figure,
                       heave_figure, overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
 from .numbers import format_interval, format_value, format_with_uncertainty
@@ -193,24 +193,6 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")
-    if result.modes:
-        # The blade's own motion (the paper saw it ring on after its step), from its heave.
-        s.table(["blade mode (from the " + result.modes[0].source + "'s heave)", "frequency (Hz)", "damping ratio"],
-                [[f"mode {i + 1}",
-                  " ± ".join(format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)),
-                  " ± ".join(format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr))]
-                 for i, m in enumerate(result.modes)])
-    if result.heave_response:
-        # The blade's heave at each dwell's frequency: a second frequency response, beside the pitch's.
-        s.table(["dwell", "f (Hz)", "heave gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
-                 "amplitude (px)"],
-                [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
-                  *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
-                 for r in result.heave_response])
-        s.figure(heave_figure(result.heave_response, result.modes), "The blade's heave (the markers' line's distance "
-                 "from the pitch axis) at each dwell's frequency, against the input: a blade that flaps answers most "
-                 "near its mode. Error bars: ±1 standard error, 0.05 px systematic included.", "Heave against frequency",
-                 name="heave")
     if result.amplitude_checks:
         verdicts = "; ".join(f"{c.frequency_hz:.3g} Hz: {100 * c.change:+.2f} % from {c.amplitudes[0]:g} to "
                              f"{c.amplitudes[-1]:g} (p = {c.p_value:.2g}, {'linear' if c.linear else 'NOT linear'})"
@@ -240,6 +222,8 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                "column is how much the other frames' amplitude differs (docs/accuracy.md, \"The codec check\").")
     sections.append(s)
 
+    if result.modes or result.heave_response or result.bending_response:
+        sections.append(_blade_section(result, figures_dir))
     if result.servo_model is not None:
         sections.append(_servo_model_section(result, figures_dir))
 
@@ -390,6 +374,99 @@ def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportS
                      f"{worst.label}, where the candidates differ most: measured (dots) and each candidate's "
                      "simulation.", "Candidates against one trace", name="candidate_traces")
     return s
+
+
+_SOURCES = {"step": "the step's ring-down", "dwells": "the dwells' ring-downs",
+            "heave_response": "the heave's frequency response"}
+
+
+def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection:
+    """The blade's motions beside its pitch (issue 18): modes, their shapes, the heave and bending per dwell."""
+    s = ReportSection("Blade motions", figures_dir=figures_dir)
+    s.text("Beside its pitch the blade moves across its chord: it heaves (the lead–trail line's distance from "
+           "the pitch axis) and, seen by more markers, bends (each marker's distance from that line). Its "
+           "structural modes ring on after the step and the dwells' starts (the paper saw it flap).")
+    if result.modes:
+        s.table(["blade mode, from", "frequency (Hz)", "± s.e.", "95 % interval", "damping ratio", "± s.e.",
+                 "95 % interval"],
+                [[_SOURCES.get(m.source, m.source),
+                  *format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz),
+                  format_interval(m.frequency_hz - 1.96 * m.frequency_stderr_hz,
+                                  m.frequency_hz + 1.96 * m.frequency_stderr_hz, m.frequency_stderr_hz),
+                  *format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr),
+                  format_interval(m.damping_ratio - 1.96 * m.damping_ratio_stderr,
+                                  m.damping_ratio + 1.96 * m.damping_ratio_stderr, m.damping_ratio_stderr)]
+                 for m in result.modes])
+    shaped = next((m for m in result.modes if m.shape is not None), None)
+    if shaped is not None:
+        sh = shaped.shape
+        s.table([f"marker (mode at {shaped.frequency_hz:.3g} Hz)", "colour", "amplitude (px)", "± s.e.",
+                 "relative to the lead", "phase against the lead (deg)", "± s.e."],
+                [[m, c, *format_with_uncertainty(a, sa), format_value(r, 3), *format_with_uncertainty(p, sp)]
+                 for m, c, a, sa, r, p, sp in zip(sh.markers, sh.colours, sh.amplitude_px, sh.amplitude_stderr_px,
+                                                  sh.relative(), sh.phase_deg, sh.phase_stderr_deg)])
+        frame = _blade_frame(result, shaped)
+        if frame is not None:
+            s.figure(frame, "A frame of the step with every marker (squares), the chord line through the lead and "
+                     "trail markers, and the mode's shape: each marker's ring-down across the chord line, drawn "
+                     "exaggerated (arrows; the dashed line joins the displaced markers).", "Blade motions frame",
+                     name="blade_frame")
+    if result.heave_response:
+        # The blade's heave at each dwell's frequency: a second frequency response, beside the pitch's.
+        s.table(["dwell", "f (Hz)", "heave gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
+                 "amplitude (px)"],
+                [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
+                  *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
+                 for r in result.heave_response])
+        hm = result.heave_model
+        curve = None
+        if hm is not None:
+            k, kse = format_with_uncertainty(hm.gain_px_per_rad, hm.gain_stderr_px_per_rad)
+            s.text(f"Fitted as a mode thrown by the pitch's acceleration, heave/pitch = κ·ω²/(ωm² − ω² + 2jζωm·ω): "
+                   f"κ = {k} ± {kse} px/rad, fm = {hm.mode.frequency_hz:.4g} ± {hm.mode.frequency_stderr_hz:.2g} Hz, "
+                   f"ζ = {hm.mode.damping_ratio:.3g} ± {hm.mode.damping_ratio_stderr:.2g} over {hm.n_dwells} dwells "
+                   f"(reduced χ² {hm.chi2_reduced:.3g}).")
+            f = np.geomspace(min(r.frequency_hz for r in result.heave_response) / 1.5,
+                             max(r.frequency_hz for r in result.heave_response) * 1.5, 400)
+            w = 2 * np.pi * f
+            pitch = result.model.transfer_function(1j * w) * np.exp(-1j * w * (result.dead_time_s or 0.0))
+            z = hm.ratio(f) * np.asarray(pitch).reshape(-1)
+            phase = np.degrees(np.angle(z))  # wrapped, as the measured phases are: broken where it wraps
+            phase[1:][np.abs(np.diff(phase)) > 180.0] = np.nan
+            curve = (f, np.abs(z), phase)
+        s.figure(heave_figure(result.heave_response, result.modes, curve), "The blade's heave (the lead–trail "
+                 "line's distance from the pitch axis) at each dwell's frequency, against the input: a blade that "
+                 "flaps answers most near its mode. Error bars: ±1 standard error, 0.05 px systematic included.",
+                 "Heave against frequency", name="heave")
+    if result.bending_response:
+        s.table(["marker", "dwell", "f (Hz)", "bending gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
+                 "amplitude (px)"],
+                [[f"{r.marker} ({r.colour})", r.label, format_value(r.frequency_hz, 4),
+                  *format_with_uncertainty(r.gain, r.gain_stderr),
+                  *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
+                 for r in result.bending_response])
+    return s
+
+
+def _blade_frame(result: "IdentificationResult", mode):
+    """The blade motions frame: the step's snapshot, every marker, the mode's shape exaggerated; None without a step."""
+    label = result.step_label
+    track = result.tracks.get(label) if label else None
+    if track is None or track.extra_xy_px is None:
+        return None
+    i = track.snapshot_index if track.snapshot_rgb is not None else int(np.argmax(track.valid))
+    pts = np.concatenate([track.lead_xy_px[i][None], track.trail_xy_px[i][None], track.extra_xy_px[i]])
+    if not np.all(np.isfinite(pts)):
+        return None
+    camera = result.campaign.camera
+    if camera is not None and track.snapshot_rgb is not None:
+        pts = camera.distort_points(pts)
+    shape = np.asarray(mode.shape.amplitude_px) * np.cos(np.radians(mode.shape.phase_deg))
+    span = float(np.hypot(*(pts[0] - pts[1])))
+    scale = 0.1 * span / max(float(np.max(np.abs(shape))), 1e-9)
+    return blade_frame_figure(track.snapshot_rgb, pts, list(mode.shape.markers), shape, scale=scale,
+                              title=f"{label}, frame {i}: every marker and the {mode.frequency_hz:.3g} Hz mode's "
+                                    "shape (exaggerated)")
 
 
 def _segmentation(result: "IdentificationResult", track, lead, trail):

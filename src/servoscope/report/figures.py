@@ -287,16 +287,21 @@ def candidate_traces_figure(trace, candidates) -> Figure:
     return fig
 
 
-def heave_figure(rows, modes) -> Figure:
+def heave_figure(rows, modes, curve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Figure:
     """The blade's heave per dwell against frequency (gain px per input unit, phase), its modes marked.
 
     A second frequency response beside the pitch's: ``rows`` are
-    :class:`~servoscope.sysid.heave.HeaveRow`, ``modes`` :class:`~servoscope.sysid.modes.ModeFit`.
+    :class:`~servoscope.sysid.heave.HeaveRow`, ``modes`` :class:`~servoscope.sysid.modes.ModeFit`;
+    ``curve`` (frequency Hz, gain, phase deg) the fitted flapping model's.
     """
     fig, (ax_g, ax_p) = plt.subplots(2, 1, figsize=(7.5, 5.4), sharex=True)
     f = np.array([r.frequency_hz for r in rows])
-    ax_g.errorbar(f, [r.gain for r in rows], yerr=[r.gain_stderr for r in rows], fmt="o", capsize=3)
+    ax_g.errorbar(f, [r.gain for r in rows], yerr=[r.gain_stderr for r in rows], fmt="o", capsize=3, label="measured")
     ax_p.errorbar(f, [r.phase_deg for r in rows], yerr=[r.phase_stderr_deg for r in rows], fmt="o", capsize=3)
+    if curve is not None:
+        ax_g.plot(curve[0], curve[1], "-", color="C1", lw=1.2, label="fitted mode × pitch model")
+        ax_p.plot(curve[0], curve[2], "-", color="C1", lw=1.2)
+        ax_g.legend(fontsize=7)
     for m in modes:
         for ax in (ax_g, ax_p):
             ax.axvspan(m.frequency_hz * (1 - m.damping_ratio), m.frequency_hz * (1 + m.damping_ratio), color="0.85")
@@ -307,5 +312,50 @@ def heave_figure(rows, modes) -> Figure:
     ax_p.set_ylabel("heave phase (deg)")
     ax_p.set_xlabel("frequency (Hz)")
     ax_g.set_title("The blade's heave at each dwell's frequency (dashed: its mode, shaded: ±ζ)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def blade_frame_figure(frame_rgb: np.ndarray | None, points_xy_px: np.ndarray, names: Sequence[str],
+                       shape: Sequence[float] | None, *, scale: float = 1.0, title: str = "") -> Figure:
+    """A frame with every marker, the chord line through the lead and trail, and a mode's shape drawn exaggerated.
+
+    Parameters
+    ----------
+    frame_rgb : ndarray (h, w, 3) or None
+        The frame (None: the markers alone, image axes).
+    points_xy_px : ndarray, shape (m, 2)
+        The markers' centroids in that frame (lead, trail, extras), recorded image px.
+    names : sequence of str
+    shape : sequence of float or None
+        Each marker's displacement across the chord line in the mode (px, up positive), drawn
+        ``scale`` times as long, the displaced markers joined in order along the chord.
+    """
+    pts = np.asarray(points_xy_px, dtype=float)
+    if frame_rgb is not None:
+        h, w = frame_rgb.shape[:2]
+        fig, ax = plt.subplots(figsize=(7.5, 7.5 * h / w + 0.4))
+        ax.imshow(frame_rgb, interpolation="nearest")
+    else:
+        fig, ax = plt.subplots(figsize=(7.5, 4.0))
+        ax.invert_yaxis()
+        ax.set_aspect("equal")
+    lead, trail = pts[0], pts[1]
+    d = (lead - trail) / np.hypot(*(lead - trail))
+    up = np.array([d[1], -d[0]])  # a quarter turn counter-clockwise on screen (y down) from trail to lead
+    ends = np.stack([trail - 0.15 * (lead - trail), lead + 0.15 * (lead - trail)])
+    ax.plot(ends[:, 0], ends[:, 1], "-", color="white", lw=1.0, label="chord line (lead–trail)")
+    for (x, y), name in zip(pts, names):
+        ax.plot([x], [y], "s", ms=7, mfc="none", mec="white", mew=1.5)
+        ax.annotate(name, (x, y), xytext=(6, 8), textcoords="offset points", color="white", fontsize=8)
+    if shape is not None:
+        moved = pts + scale * np.asarray(shape, dtype=float)[:, None] * up[None, :]
+        order = np.argsort((pts - trail) @ d)
+        for p, q in zip(pts, moved):
+            ax.annotate("", q, p, arrowprops={"arrowstyle": "->", "color": "yellow", "lw": 1.2})
+        ax.plot(moved[order, 0], moved[order, 1], "--", color="yellow", lw=1.2, label=f"mode shape ×{scale:.3g}")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title or "Every marker, the chord line and the mode's shape (exaggerated)", fontsize=9)
+    ax.set_axis_off()
     fig.tight_layout()
     return fig

@@ -17,7 +17,7 @@ import numpy as np
 from ..results import jsonable
 from .hac import hac_covariance
 
-__all__ = ["HEAVE_SYSTEMATIC_PX", "HeaveRow", "dwell_heave"]
+__all__ = ["HEAVE_SYSTEMATIC_PX", "HeaveModel", "HeaveRow", "dwell_heave", "fit_heave_model"]
 
 #: Systematic uncertainty of a dwell's heave amplitude, px, added to the fit's: a rigid blade
 #: (quick preset, 720×576, H.264, seed 3) showed 0.063 px at 1 Hz, 6 of the fit's standard
@@ -38,6 +38,11 @@ class HeaveRow:
     phase_deg, phase_stderr_deg : float
         Against the input's sine (0 before its start), degrees in (−180, 180].
     amplitude_px : float
+    marker : str
+        Whose motion: ``""`` for the blade's heave (the chord line's), a marker's
+        name (``"extra1"`` …) for that marker's bending across the line.
+    colour : str
+        That marker's colour as given (``""`` for the heave).
     """
 
     label: str
@@ -47,22 +52,26 @@ class HeaveRow:
     phase_deg: float
     phase_stderr_deg: float
     amplitude_px: float
+    marker: str = ""
+    colour: str = ""
 
     def summary(self) -> dict[str, Any]:
-        """Plain types, a row of result.json's ``heave_response``."""
-        return jsonable({"video": self.label, "frequency_hz": self.frequency_hz, "gain": self.gain,
+        """Plain types, a row of result.json's ``heave_response`` (or, with a marker, ``bending_response``)."""
+        return jsonable({**({"marker": self.marker, "colour": self.colour} if self.marker else {}),
+                         "video": self.label, "frequency_hz": self.frequency_hz, "gain": self.gain,
                          "gain_stderr": self.gain_stderr, "phase_deg": self.phase_deg,
                          "phase_stderr_deg": self.phase_stderr_deg, "amplitude_px": self.amplitude_px,
                          "units": "px per input unit"})
 
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> "HeaveRow":
+        """The row back from :meth:`summary`'s dict."""
         return cls(d["video"], d["frequency_hz"], d["gain"], d["gain_stderr"], d["phase_deg"], d["phase_stderr_deg"],
-                   d["amplitude_px"])
+                   d["amplitude_px"], d.get("marker", ""), d.get("colour", ""))
 
 
 def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s: float, amplitude: float,
-                window_s: tuple[float, float], label: str = "") -> HeaveRow | None:
+                window_s: tuple[float, float], label: str = "", marker: str = "", colour: str = "") -> HeaveRow | None:
     """The heave's sine at ``frequency_hz`` in a dwell's steady window, by least squares with HAC errors.
 
     The errors include :data:`HEAVE_SYSTEMATIC_PX` (in phase as that much displacement
@@ -87,4 +96,126 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
     se_amp = math.hypot(math.sqrt(max(float(ga @ c2 @ ga), 0.0)), HEAVE_SYSTEMATIC_PX)
     se_phase = math.hypot(math.sqrt(max(float(gp @ c2 @ gp), 0.0)), HEAVE_SYSTEMATIC_PX / amp)
     return HeaveRow(label, float(frequency_hz), amp / abs(amplitude), se_amp / abs(amplitude),
-                    math.degrees(math.atan2(b, a)), math.degrees(se_phase), amp)
+                    math.degrees(math.atan2(b, a)), math.degrees(se_phase), amp, marker, colour)
+
+
+@dataclass(frozen=True)
+class HeaveModel:
+    """The flapping frequency response fitted: heave over pitch as a mode driven by the pitch's acceleration.
+
+    ``Q/Θ(jω) = κ·ω² / (ωm² − ω² + 2j·ζ·ωm·ω)`` (``−κ s²`` over the mode's denominator, as a
+    blade whose inertia the pitch's acceleration throws across its chord), fitted to each
+    dwell's heave over its pitch (complex ratios, px per rad).
+
+    Attributes
+    ----------
+    gain_px_per_rad, gain_stderr_px_per_rad : float
+        κ: the heave per rad of pitch well above the mode.
+    mode : ModeFit
+        The mode's frequency and damping with their errors (source ``"heave_response"``).
+    chi2_reduced : float
+        The fit's χ² over its degrees of freedom (errors widened by its square root when above 1).
+    n_dwells : int
+    """
+
+    gain_px_per_rad: float
+    gain_stderr_px_per_rad: float
+    mode: Any
+    chi2_reduced: float
+    n_dwells: int
+
+    def ratio(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """The fitted heave over pitch (complex, px per rad) at ``frequency_hz``."""
+        w = 2.0 * math.pi * np.asarray(frequency_hz, dtype=float)
+        wm, z = 2.0 * math.pi * self.mode.frequency_hz, self.mode.damping_ratio
+        return self.gain_px_per_rad * w**2 / (wm**2 - w**2 + 2j * z * wm * w)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain types, result.json's ``heave_model``."""
+        return jsonable({"model": "heave/pitch = kappa*w^2/(wm^2 - w^2 + 2j*zeta*wm*w)",
+                         "gain_px_per_rad": self.gain_px_per_rad, "gain_stderr_px_per_rad": self.gain_stderr_px_per_rad,
+                         "frequency_hz": self.mode.frequency_hz, "damping_ratio": self.mode.damping_ratio,
+                         "stderr": {"frequency_hz": self.mode.frequency_stderr_hz,
+                                    "damping_ratio": self.mode.damping_ratio_stderr},
+                         "chi2_reduced": self.chi2_reduced, "n_dwells": self.n_dwells})
+
+    @classmethod
+    def from_summary(cls, d: dict[str, Any]) -> "HeaveModel":
+        """The model back from :meth:`summary`'s dict."""
+        from .modes import ModeFit
+
+        mode = ModeFit(d["frequency_hz"], d["stderr"]["frequency_hz"], d["damping_ratio"], d["stderr"]["damping_ratio"],
+                       d["gain_px_per_rad"], "heave_response")
+        return cls(d["gain_px_per_rad"], d["gain_stderr_px_per_rad"], mode, d["chi2_reduced"], d["n_dwells"])
+
+
+def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, float, float]],
+                    start_hz: float | None = None) -> HeaveModel | None:
+    """Fit :class:`HeaveModel` to the dwells' heave over their pitch; None when it cannot be told.
+
+    Parameters
+    ----------
+    rows : list of HeaveRow
+        Each dwell's heave (gain per input unit, phase against the input).
+    pitch : dict of label → (gain, gain_stderr, phase_rad, phase_stderr_rad)
+        Each dwell's pitch against the same input (rad per input unit).
+    start_hz : float, optional
+        A mode's frequency to start from (the step's); else a grid over the dwells' range.
+
+    Each ratio's error is isotropic in the complex plane: its modulus times the larger of its
+    relative gain error and its phase error. The covariance is the Jacobian's, widened by the
+    reduced χ² when above 1, then the modes' systematic part (:data:`~servoscope.sysid.modes.MODE_SYSTEMATIC`)
+    is added. None with fewer than 3 dwells, a fit that fails, a damping ratio outside
+    (0, ``MAX_MODE_DAMPING``], or a mode outside the dwells' frequencies (where nothing shows it).
+    """
+    from scipy.optimize import least_squares
+
+    from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit
+
+    data = [(r, pitch[r.label]) for r in rows if r.label in pitch and pitch[r.label][0] > 0]
+    if len(data) < 3:
+        return None
+    f = np.array([r.frequency_hz for r, _ in data])
+    z = np.array([r.gain / p[0] * np.exp(1j * (math.radians(r.phase_deg) - p[2])) for r, p in data])
+    rel = np.array([max(math.hypot(r.gain_stderr / r.gain if r.gain > 0 else np.inf, p[1] / p[0]),
+                        math.hypot(math.radians(r.phase_stderr_deg), p[3])) for r, p in data])
+    sd = np.abs(z) * np.minimum(rel, 1e6) + 1e-12
+    w = 2.0 * math.pi * f
+
+    def model(x):
+        kappa, fm, zeta = x
+        wm = 2.0 * math.pi * fm
+        return kappa * w**2 / (wm**2 - w**2 + 2j * zeta * wm * w)
+
+    def resid(x):
+        d = (model(x) - z) / sd
+        return np.concatenate([d.real, d.imag])
+
+    starts = [start_hz] if start_hz else list(np.geomspace(f.min(), f.max(), 12))
+    best = None
+    for fm0 in starts:
+        wm0 = 2.0 * math.pi * fm0
+        shape = w**2 / (wm0**2 - w**2 + 2j * 0.05 * wm0 * w)
+        kappa0 = float(np.real(np.vdot(shape / sd, z / sd)) / np.real(np.vdot(shape / sd, shape / sd)))
+        try:
+            sol = least_squares(resid, [kappa0, fm0, 0.05], bounds=([-np.inf, 0.2 * f.min(), 1e-4],
+                                                                    [np.inf, 5.0 * f.max(), 0.9]))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if sol.success and (best is None or sol.cost < best.cost):
+            best = sol
+    if best is None:
+        return None
+    kappa, fm, zeta = (float(v) for v in best.x)
+    dof = max(2 * len(data) - 3, 1)
+    chi2 = 2.0 * float(best.cost) / dof
+    try:
+        cov = np.linalg.inv(best.jac.T @ best.jac) * max(chi2, 1.0)
+    except np.linalg.LinAlgError:
+        return None
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    if not (0.0 < zeta <= MAX_MODE_DAMPING and f.min() <= fm <= f.max() and np.all(np.isfinite(se))):
+        return None
+    mode = ModeFit(fm, math.hypot(float(se[1]), MODE_SYSTEMATIC["frequency"] * fm), zeta,
+                   math.hypot(float(se[2]), MODE_SYSTEMATIC["damping"] * zeta), abs(kappa), "heave_response")
+    return HeaveModel(kappa, float(se[0]), mode, chi2, len(data))

@@ -22,7 +22,9 @@ from scipy.optimize import OptimizeWarning, curve_fit
 
 from servoscope.results import jsonable
 
-__all__ = ["ModeFit", "fit_damped_mode", "pool_modes"]
+from .hac import hac_covariance
+
+__all__ = ["ModeFit", "ModeShape", "fit_damped_mode", "fit_mode_shape", "pool_modes"]
 
 #: A ring-down is taken as seen when its amplitude is this many times the signal's noise.
 MIN_SNR = 10.0
@@ -52,6 +54,8 @@ class ModeFit:
         The ring-down's amplitude at the window's start (the signal's units).
     source : str
         What it was fitted to (``"step"``).
+    shape : ModeShape or None
+        Which markers move in it and how (:func:`fit_mode_shape`); None with two markers.
     """
 
     frequency_hz: float
@@ -60,6 +64,7 @@ class ModeFit:
     damping_ratio_stderr: float
     amplitude: float
     source: str
+    shape: "ModeShape | None" = None
 
     def summary(self) -> dict[str, Any]:
         """Plain types, for result.json's ``modes``."""
@@ -70,7 +75,99 @@ class ModeFit:
                                       self.frequency_hz + _Z95 * self.frequency_stderr_hz],
                      "damping_ratio": [self.damping_ratio - _Z95 * self.damping_ratio_stderr,
                                        self.damping_ratio + _Z95 * self.damping_ratio_stderr]},
-            "amplitude": self.amplitude, "source": self.source})
+            "amplitude": self.amplitude, "source": self.source,
+            **({"shape": self.shape.summary()} if self.shape is not None else {})})
+
+    @classmethod
+    def from_summary(cls, d: dict[str, Any]) -> "ModeFit":
+        """The mode back from :meth:`summary`'s dict."""
+        return cls(d["frequency_hz"], d["stderr"]["frequency_hz"], d["damping_ratio"], d["stderr"]["damping_ratio"],
+                   d["amplitude"], d["source"], None if "shape" not in d else ModeShape.from_summary(d["shape"]))
+
+
+@dataclass(frozen=True)
+class ModeShape:
+    """A mode's shape: each marker's ring-down amplitude across the chord line, and its phase against the first's.
+
+    Attributes
+    ----------
+    markers, colours : tuple of str
+        The markers' names (``lead``, ``trail``, ``extra1`` …) and colours.
+    amplitude_px, amplitude_stderr_px : tuple of float
+        Each marker's ring-down amplitude at the window's start (px).
+    phase_deg, phase_stderr_deg : tuple of float
+        Each marker's phase against the first marker's (degrees in (−180, 180]): 0 moves with
+        it, 180 against it.
+    """
+
+    markers: tuple[str, ...]
+    colours: tuple[str, ...]
+    amplitude_px: tuple[float, ...]
+    amplitude_stderr_px: tuple[float, ...]
+    phase_deg: tuple[float, ...]
+    phase_stderr_deg: tuple[float, ...]
+
+    def relative(self) -> np.ndarray:
+        """Each marker's signed amplitude over the first marker's (cos of the phase carries the sign)."""
+        amp = np.asarray(self.amplitude_px)
+        return amp * np.cos(np.radians(self.phase_deg)) / amp[0]
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Plain types, a mode's ``shape`` in result.json: one entry per marker."""
+        rel = self.relative()
+        return jsonable([{"marker": m, "colour": c, "amplitude_px": a, "amplitude_stderr_px": sa,
+                          "relative_amplitude": r, "phase_deg": p, "phase_stderr_deg": sp}
+                         for m, c, a, sa, r, p, sp in zip(self.markers, self.colours, self.amplitude_px,
+                                                          self.amplitude_stderr_px, rel, self.phase_deg,
+                                                          self.phase_stderr_deg)])
+
+    @classmethod
+    def from_summary(cls, rows: list[dict[str, Any]]) -> "ModeShape":
+        """The shape back from :meth:`summary`'s list."""
+        return cls(*(tuple(r[k] for r in rows) for k in ("marker", "colour", "amplitude_px", "amplitude_stderr_px",
+                                                          "phase_deg", "phase_stderr_deg")))
+
+
+def fit_mode_shape(time_s: np.ndarray, signals: np.ndarray, start_s: float, mode: ModeFit,
+                   markers: tuple[str, ...], colours: tuple[str, ...], *,
+                   systematic_px: float = 0.0) -> ModeShape | None:
+    """Each marker's share of a fitted mode: its signal's ring-down at the mode's frequency and damping.
+
+    With the mode's frequency and damping held, each marker's signal (its distance across the
+    chord line from where it rests, px) from ``start_s`` on is a linear least-squares fit of
+    ``e^(−σt)·(a·cos ω_d t + b·sin ω_d t) + c``; its amplitude and phase by the delta method from
+    the Newey–West covariance, plus ``systematic_px`` in amplitude (and that much displacement
+    in phase). Phases are against the first marker's. None with fewer than 20 samples.
+    """
+    t = np.asarray(time_s, dtype=float)
+    y = np.asarray(signals, dtype=float)
+    keep = np.isfinite(t) & (t >= start_s) & np.all(np.isfinite(y), axis=1)
+    if np.count_nonzero(keep) < 20:
+        return None
+    tt = t[keep] - start_s
+    wn = 2.0 * math.pi * mode.frequency_hz
+    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
+    env = np.exp(-sigma * tt)
+    design = np.column_stack([env * np.cos(wd * tt), env * np.sin(wd * tt), np.ones_like(tt)])
+    amps, amp_se, phases, phase_se = [], [], [], []
+    for k in range(y.shape[1]):
+        v = y[keep, k]
+        coef, *_ = np.linalg.lstsq(design, v, rcond=None)
+        cov = hac_covariance(design, v - design @ coef)[:2, :2]
+        a, b = float(coef[0]), float(coef[1])
+        amp = math.hypot(a, b)
+        amp = max(amp, 1e-12)
+        # a·cos + b·sin = amp·cos(ω_d t + φ) with φ = atan2(−b, a).
+        ga = np.array([a, b]) / amp
+        gp = np.array([b, -a]) / amp**2
+        amps.append(amp)
+        amp_se.append(math.hypot(math.sqrt(max(float(ga @ cov @ ga), 0.0)), systematic_px))
+        phases.append(math.atan2(-b, a))
+        phase_se.append(math.hypot(math.sqrt(max(float(gp @ cov @ gp), 0.0)), systematic_px / amp))
+    rel = [math.degrees(math.remainder(p - phases[0], 2.0 * math.pi)) for p in phases]
+    # The first marker's phase is the reference: the others' errors carry its error too.
+    rel_se = [0.0] + [math.degrees(math.hypot(s, phase_se[0])) for s in phase_se[1:]]
+    return ModeShape(tuple(markers), tuple(colours), tuple(amps), tuple(amp_se), tuple(rel), tuple(rel_se))
 
 
 def _ringdown(t, a, sigma, wd, phi, c):
