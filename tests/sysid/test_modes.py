@@ -78,12 +78,17 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
     truth = json.loads((tmp_path / "truth.json").read_text())
     assert truth["modes"][0]["frequency_hz"] == 9.0
     res = identify(toml, workers=1)
-    # Found from the step alone and from the dwells alone (each dwell rings down after its sine starts).
-    assert [m.source for m in res.modes] == ["step", "dwells"]
+    # Found from the step alone and from the dwells alone (each dwell rings down after its sine starts),
+    # and from the heave's frequency response fitted as a mode where its dwells can tell it.
+    assert [m.source for m in res.modes][:2] == ["step", "dwells"]
+    assert {m.source for m in res.modes} <= {"step", "dwells", "heave_response"}
     s = res.summary()
     for mode, entry in zip(res.modes, s["modes"]):
-        # The issue's targets: frequency within 1 %, damping within 15 %.
-        assert mode.frequency_hz == pytest.approx(9.0, rel=0.01) and mode.damping_ratio == pytest.approx(0.03, rel=0.15)
+        # The issue's targets: frequency within 1 %, damping within 15 % (the quick preset's four dwells
+        # leave the heave's own fit wide: its interval says so).
+        if mode.source != "heave_response":
+            assert mode.frequency_hz == pytest.approx(9.0, rel=0.01)
+            assert mode.damping_ratio == pytest.approx(0.03, rel=0.15)
         for key, value in (("frequency_hz", 9.0), ("damping_ratio", 0.03)):
             lo, hi = entry["ci95"][key]
             assert lo <= value <= hi, (mode.source, key, lo, hi)
@@ -130,3 +135,57 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
                                        step_after_t0_s=1.5), workers=1)
     assert rigid.modes == [] and "modes" not in rigid.summary()
     assert rigid.heave_response == [] and "heave_response" not in rigid.summary()
+
+
+def test_a_mode_shape_across_markers():
+    """Each marker's share of a ring-down, and its phase against the first's: put in by hand."""
+    from servoscope.sysid.modes import ModeFit, ModeShape, fit_mode_shape
+
+    rng = np.random.default_rng(7)
+    t = np.arange(400) * 0.005
+    wn, z = 2 * math.pi * 9.0, 0.03
+    wd = wn * math.sqrt(1 - z * z)
+    ring = np.exp(-z * wn * t)
+    amps, phases = [1.2, 1.2, 0.6, -0.45], [0.3, 0.3, 0.3, 0.3]  # the last moves against the others
+    y = np.column_stack([a * ring * np.cos(wd * t + p) + 5.0 + 0.01 * rng.standard_normal(t.size)
+                         for a, p in zip(amps, phases)])
+    mode = ModeFit(9.0, 0.01, z, 0.001, 1.2, "step")
+    shape = fit_mode_shape(t, y, 0.0, mode, ("lead", "trail", "extra1", "extra2"), ("#a", "#b", "#c", "#d"),
+                           systematic_px=0.05)
+    assert shape.relative() == pytest.approx([1.0, 1.0, 0.5, -0.375], abs=0.01)
+    assert shape.phase_deg[3] == pytest.approx(180.0, abs=1.0) or shape.phase_deg[3] == pytest.approx(-180.0, abs=1.0)
+    for a, se in zip(shape.amplitude_px, shape.amplitude_stderr_px):
+        assert se >= 0.05  # the systematic part is in
+    for a_true, a in zip(amps, shape.amplitude_px):
+        assert abs(a - abs(a_true)) < 0.02
+    assert ModeShape.from_summary(shape.summary()) == shape
+    assert ModeFit.from_summary({**ModeFit(9.0, 0.01, z, 0.001, 1.2, "step", shape).summary()}).shape == shape
+
+
+def test_the_flapping_response_fitted_as_a_mode():
+    """heave/pitch = κω²/(ωm² − ω² + 2jζωmω) with known κ, fm, ζ: recovered within the stated intervals."""
+    from servoscope.sysid.heave import HeaveModel, HeaveRow, fit_heave_model
+
+    rng = np.random.default_rng(3)
+    kappa, fm, zeta = 40.0, 9.0, 0.03
+    rows, pitch = [], {}
+    for k, f in enumerate(np.geomspace(1.0, 20.0, 14)):
+        w, wm = 2 * math.pi * f, 2 * math.pi * fm
+        ratio = kappa * w**2 / (wm**2 - w**2 + 2j * zeta * wm * w)
+        g = 0.23 / abs(1 + 1j * w / 37.0)  # a pitch response, its phase any
+        ph = -math.atan(w / 37.0) - w * 0.085
+        h = ratio * g * np.exp(1j * ph)
+        noise = 0.02 * abs(h) * (rng.standard_normal() + 1j * rng.standard_normal()) / math.sqrt(2)
+        h = h + noise
+        rows.append(HeaveRow(f"d{k}", f, abs(h), 0.02 * abs(h), math.degrees(np.angle(h)), math.degrees(0.02), abs(h)))
+        pitch[f"d{k}"] = (g, 1e-5, ph, 1e-4)
+    model = fit_heave_model(rows, pitch)
+    assert model is not None and model.n_dwells == 14
+    assert abs(model.gain_px_per_rad - kappa) < 3 * model.gain_stderr_px_per_rad
+    assert abs(model.mode.frequency_hz - fm) < 3 * model.mode.frequency_stderr_hz
+    assert abs(model.mode.damping_ratio - zeta) < 3 * model.mode.damping_ratio_stderr
+    assert model.mode.frequency_hz == pytest.approx(fm, rel=0.01) and model.mode.source == "heave_response"
+    back = HeaveModel.from_summary(model.summary())
+    assert back.ratio(np.array([5.0])) == pytest.approx(model.ratio(np.array([5.0])))
+    # Two dwells cannot tell three parameters.
+    assert fit_heave_model(rows[:2], pitch) is None

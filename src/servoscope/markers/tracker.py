@@ -187,11 +187,12 @@ def _against_reference(path: Path, settings: TrackerSettings, track: Track) -> T
 
 def _check_extra(settings: TrackerSettings) -> None:
     """Refuse extra markers that cannot be told apart: not a colour, or another marker's colour."""
-    named = {"lead": settings.lead, "trail": settings.trail, **({"LED": settings.led} if settings.led else {}),
-             **({f"reference {i + 1}": c for i, c in enumerate(settings.reference or ())})}
+    named = {"the lead marker": settings.lead, "the trail marker": settings.trail,
+             **({"the LED": settings.led} if settings.led else {}),
+             **({f"reference sticker {i + 1}": c for i, c in enumerate(settings.reference or ())})}
     seen: dict[tuple, str] = {}
     for name, colour in named.items():
-        spec = parse_colour(colour, what=f"{name} colour") if colour not in ("auto",) else None
+        spec = parse_colour(colour, what=f"{name}'s colour") if colour not in ("auto",) else None
         if isinstance(spec, tuple):
             seen[tuple(round(float(c)) for c in spec)] = name
     for k, colour in enumerate(settings.extra):
@@ -202,12 +203,13 @@ def _check_extra(settings: TrackerSettings) -> None:
                                   f"not {colour!r}")
         key = tuple(round(float(c)) for c in spec)
         if key in seen:
-            raise ServoscopeError(f"{what} has the {seen[key]}'s colour: give each marker a colour of its own")
+            raise ServoscopeError(f"{what} has the same colour as {seen[key]}: give each marker a colour of its own")
         seen[key] = f"extra marker {k + 1}"
 
 
 def _as_extra(text: str, names: tuple[str, str]) -> str:
     """A message about an extra-marker pass, its two markers named as the user named them."""
+    text = text.replace("lead and trail markers", f"{names[0]} and {names[1]}")
     return text.replace("lead marker", names[0]).replace("trail marker", names[1])
 
 

@@ -1,0 +1,153 @@
+"""More markers along the blade: bending, mode shapes, the flapping response (issue 18, builds 1, 2, 4, 5).
+
+The twin renders extra stickers between the lead and trail ones and a 9 Hz mode that bends
+the blade (a sticker halfway moves half the heave, one a quarter of the way 62.5 %); truth
+lists each sticker's share. Oracles: the renderer's truth (each frame's heave, each
+sticker's share) and the two-marker identification of the same footage.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from servoscope.errors import ServoscopeError
+
+EXTRAS = (("#1f77b4", 0.5), ("#9467bd", 0.25))
+
+
+def _render(tmp_path, **kw):
+    from servoscope.simulate import simulate_campaign
+
+    args = dict(width=480, height=384, codec="raw", blade_mode_hz=9.0, blade_mode_damping=0.03, blade_mode_bend=0.5,
+                step_after_t0_s=1.5, extra_stickers=EXTRAS)
+    args.update(kw)
+    toml = simulate_campaign(tmp_path, "quick", 0, **args)
+    return toml, json.loads((tmp_path / "truth.json").read_text())
+
+
+def test_extra_markers_bend_as_rendered_and_leave_the_pitch_alone(tmp_path):
+    """Square stickers under H.264 (not the defaults the tracker was tuned on): each marker's bending is the
+    renderer's, and the pitch is the two-marker pitch bit for bit."""
+    from servoscope.camera import CameraModel
+    from servoscope.markers import TrackerSettings, track_video
+
+    _, truth = _render(tmp_path, frequencies_hz=(), codec="h264", sticker_shape="square")
+    test = truth["tests"][0]
+    settings = TrackerSettings(camera=CameraModel.load(tmp_path / "camera.json"),
+                               exposure_s=truth["video"]["exposure_s"])
+    two = track_video(tmp_path / test["video"], settings)
+    many = track_video(tmp_path / test["video"], TrackerSettings(**{**settings.__dict__,
+                                                                     "extra": tuple(c for c, _ in EXTRAS)}))
+    assert many.n_valid == two.n_valid > 0.95 * two.n_frames
+    v = many.valid
+    assert np.array_equal(many.angle_rad[v], two.angle_rad[v])
+    assert np.array_equal(many.angle_sigma_rad[v], two.angle_sigma_rad[v])
+    heave = np.asarray(test["heave_px"])
+    shares = truth["modes"][0]["shape"]["extra"]
+    assert shares == pytest.approx([0.5, 0.625])
+    for k, share in enumerate(shares):
+        b = many.bending_px[v, 2 + k]
+        expected = (share - 1.0) * heave[v]
+        err = (b - np.median(b)) - (expected - np.median(expected))
+        assert np.std(expected) > 0.2 and np.sqrt(np.mean(err**2)) < 0.05, (k, np.sqrt(np.mean(err**2)))
+    assert np.allclose(many.bending_px[v, :2], 0.0, atol=1e-9)
+    # The table carries every marker's columns, and reads back.
+    from servoscope.markers import Track
+
+    many.to_csv(tmp_path / "t.csv")
+    back = Track.from_csv(tmp_path / "t.csv")
+    assert np.array_equal(back.bending_px[v], many.bending_px[v]) and back.extra_xy_px.shape == (many.n_frames, 2, 2)
+
+
+def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
+    from servoscope.campaign import IdentificationResult
+    from servoscope.campaign.result import input_start
+    from servoscope.campaign.runner import identify
+    from servoscope.report.build import build_report
+    from servoscope.sysid.heave import dwell_heave
+
+    toml, truth = _render(tmp_path)
+    assert 'extra = ["#1f77b4", "#9467bd"]' in toml.read_text()
+    res = identify(toml, workers=1)
+    s = res.summary()
+    assert s["extra_markers"] == ["#1f77b4", "#9467bd"]
+    step_mode = next(m for m in res.modes if m.source == "step")
+    assert step_mode.frequency_hz == pytest.approx(9.0, rel=0.01) and step_mode.damping_ratio == pytest.approx(0.03, rel=0.15)
+    # Which markers move, and how: each one's share of the mode against the renderer's, within 3 σ.
+    shape = step_mode.shape
+    assert shape.markers == ("lead", "trail", "extra1", "extra2")
+    assert shape.colours[2:] == ("#1f77b4", "#9467bd")
+    rel = shape.relative()
+    true_rel = [1.0, 1.0, 0.5, 0.625]
+    for k in (2, 3):
+        se = rel[k] * np.hypot(shape.amplitude_stderr_px[k] / shape.amplitude_px[k],
+                               shape.amplitude_stderr_px[0] / shape.amplitude_px[0])
+        assert abs(rel[k] - true_rel[k]) < 3 * se and abs(rel[k] - true_rel[k]) < 0.03, (k, rel[k], se)
+        assert abs(shape.phase_deg[k]) < 3 * shape.phase_stderr_deg[k] + 1e-9
+    # Each marker's bending per dwell against the renderer's, fitted alike, within 3 stated errors.
+    rows = s["bending_response"]
+    assert {(r["marker"], r["video"]) for r in rows} == {(m, t) for m in ("extra1", "extra2") for t in res.sine_fits}
+    checked = 0
+    for r in rows:
+        k = int(r["marker"][-1]) - 1
+        tt = next(t for t in truth["tests"] if t["video"].startswith(r["video"]))
+        test = next(t for t in res.campaign.tests if t.label == r["video"])
+        ref = dwell_heave(np.asarray(tt["time_s"]), (true_rel[2 + k] - 1.0) * np.asarray(tt["heave_px"]),
+                          test.frequency_hz, input_start(test, res.tracks[test.label]), test.amplitude,
+                          res.sine_fits[test.label].window_s)
+        assert abs(r["gain"] - ref.gain) < 3 * r["gain_stderr"], (r, ref)
+        if r["amplitude_px"] > 0.1:
+            assert abs(r["phase_deg"] - ref.phase_deg) < 3 * r["phase_stderr_deg"], (r, ref)
+            checked += 1
+    assert checked >= 2
+    # The flapping response fitted as a mode: its interval holds the renderer's.
+    hm = s["heave_model"]
+    for key, value in (("frequency_hz", 9.0), ("damping_ratio", 0.03)):
+        assert abs(hm[key] - value) < 3 * hm["stderr"][key], (key, hm)
+    assert abs(hm["gain_px_per_rad"] - 40.0) < 3 * hm["gain_stderr_px_per_rad"]
+    # The report's blade motions: the mode shape's table and frame.
+    html = build_report(res)
+    assert "Blade motions" in html and "Blade motions frame" in html and "relative to the lead" in html
+    assert "bending gain (px per input unit)" in html
+    # Saved and read back to the byte.
+    res.write(tmp_path / "out")
+    back = IdentificationResult.load(tmp_path / "out")
+    assert back.summary() == s
+    # The same footage with two markers: every pitch number as with four.
+    two = toml.read_text().replace('extra = ["#1f77b4", "#9467bd"]\n', "")
+    (tmp_path / "two.toml").write_text(two)
+    res2 = identify(tmp_path / "two.toml", workers=1)
+    s2 = res2.summary()
+    assert s2["frequency_response"] == s["frequency_response"] and s2["model"] == s["model"]
+    assert s2["heave_response"] == s["heave_response"] and "bending_response" not in s2
+    assert [m for m in s2["modes"] if m["source"] != "step"] == [m for m in s["modes"] if m["source"] != "step"]
+
+
+def test_extra_markers_bad_input(tmp_path):
+    from servoscope.campaign.manifest import load_campaign
+    from servoscope.markers import TrackerSettings, track_video
+
+    toml, truth = _render(tmp_path, frequencies_hz=(), extra_stickers=EXTRAS[:1], step_after_t0_s=0.4)
+    video = tmp_path / truth["tests"][0]["video"]
+    # A colour that matches nothing in the picture: named, with the closest blobs.
+    with pytest.raises(ServoscopeError, match=r"extra marker 1 \(#9467bd\)'s colour #9467bd matches nothing"):
+        track_video(video, TrackerSettings(extra=("#9467bd",)))
+    # Another marker's colour, or one that finds the lead's sticker.
+    with pytest.raises(ServoscopeError, match="same colour as the lead marker"):
+        track_video(video, TrackerSettings(extra=("#d62728",)))
+    with pytest.raises(ServoscopeError, match="same blob|found on the lead marker"):
+        track_video(video, TrackerSettings(extra=("#c83030",)))
+    with pytest.raises(ServoscopeError, match="told by colour"):
+        track_video(video, TrackerSettings(extra=("bright",)))
+    # The manifest says which entry is wrong.
+    text = toml.read_text()
+    for bad, why in (('extra = ["#1f77b4", "#1f77b4"]', r"markers.extra\[1\].*colour of its own"),
+                     ('extra = ["#2ca02c"]', r"markers.extra\[0\].*trail's colour"),
+                     ('extra = "#1f77b4"', "markers.extra: the colours"),
+                     ('extra = ["nonsense-colour"]', r"markers.extra\[0\]")):
+        (tmp_path / "bad.toml").write_text(text.replace('extra = ["#1f77b4"]', bad))
+        with pytest.raises(ServoscopeError, match=why):
+            load_campaign(tmp_path / "bad.toml")
