@@ -62,13 +62,13 @@ def test_round_trip_gives_equal_tracks(quick_result, tmp_path):
 def test_fields_added_to_track_round_trip(tmp_path, monkeypatch):
     @dataclass
     class TrackPlus(Track):  # what another engineer adding fields to Track would make
-        extra_sigma_px: np.ndarray | None = None
+        spare_sigma_px: np.ndarray | None = None
         note: str = ""
         counts: list[int] = dataclasses.field(default_factory=list)
 
     base = _synthetic_track()
     plus = TrackPlus(**{f.name: getattr(base, f.name) for f in dataclasses.fields(Track)},
-                     extra_sigma_px=np.linspace(0, 1, 7), note="n", counts=[1, 2])
+                     spare_sigma_px=np.linspace(0, 1, 7), note="n", counts=[1, 2])
     cache = TrackCache(tmp_path)
     cache.store("old", base)  # written before the fields existed
     monkeypatch.setattr(cache_module, "Track", TrackPlus)

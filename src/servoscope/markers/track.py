@@ -142,6 +142,8 @@ class Track:
         for name in ("lead_shape_px2", "trail_shape_px2"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full((n, 3), np.nan))
+        # A list (JSON's, the cache's) is the same colours.
+        self.extra_colours = tuple(self.extra_colours)
         # ...and the angle's sample times: a global shutter's are the frame times.
         if self.angle_time_s is None:
             self.angle_time_s = np.array(self.time_s, dtype=np.float64)

@@ -412,6 +412,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
     if p.reference_stickers:
         scene = replace(scene, clutter=tuple(scene.clutter) + reference_stickers(scene))
+    if p.extra_stickers:
+        scene = replace(scene, extra_stickers=p.extra_stickers)
     if p.monochrome and scene.extra_stickers:
         raise ServoscopeError("extra_stickers are told by colour: the twin's monochrome camera films two white dots "
                               "(leave out extra_stickers or monochrome)")

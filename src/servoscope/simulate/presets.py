@@ -10,6 +10,7 @@ from fractions import Fraction
 import numpy as np
 
 from ..camera.model import CameraModel
+from ..defaults import EXTRA_COLOURS
 from ..errors import ServoscopeError
 from .scene import REFERENCE_SIZE, Scene
 from .servo import ServoModel
@@ -150,8 +151,13 @@ class CampaignPreset:
         f of the way from the trail sticker (0) to the lead (1) moves
         ``1 − 4·bend·f·(1 − f)`` of the heave (the lead and trail stickers all of
         it, a sticker halfway ``1 − bend``), seen by extra stickers
-        (``extra_stickers``, a :class:`~servoscope.simulate.Scene` setting); truth's
-        mode lists its ``shape`` at each sticker. 0 (the default): a rigid blade's mode.
+        (``extra_stickers``); truth's mode lists its ``shape`` at each sticker. 0 (the
+        default): a rigid blade's mode.
+    extra_stickers : tuple of (str, float)
+        More stickers on the blade, ``(colour, position)`` with position from the
+        trail sticker (0) to the lead (1) (the scene's
+        :attr:`~servoscope.simulate.Scene.extra_stickers`); campaign.toml names
+        them as ``[markers] extra``. Empty (the default): two stickers.
     sine_amplitudes : tuple of float or None
         Amplitude as a test axis: a dwell at every frequency for each of these
         input amplitudes (frequency by frequency), instead of ``sine_amplitude``
@@ -222,9 +228,11 @@ class CampaignPreset:
     blade_mode_damping: float = 0.03
     blade_mode_px_per_rad: float = 40.0
     blade_mode_bend: float = 0.0
+    extra_stickers: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         self._check_camera_options()
+        object.__setattr__(self, "extra_stickers", tuple((str(c), float(f)) for c, f in self.extra_stickers))
         freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):
             raise ServoscopeError("frequencies_hz must be positive")
@@ -337,6 +345,10 @@ PRESETS: dict[str, CampaignPreset] = {
 # (the paper saw it ring on after the step for seconds); a longer step shows its ring-down.
 PRESETS["paper-flap"] = replace(PRESETS["paper"], name="paper-flap", blade_mode_hz=9.0, blade_mode_damping=0.03,
                                 step_after_t0_s=2.5)
+# The same blade seen by two more stickers (issue 18): halfway and a quarter of the way from the trail
+# sticker to the lead, and a mode that bends it (the middle moves half as far as the ends).
+PRESETS["paper-bend"] = replace(PRESETS["paper-flap"], name="paper-bend", blade_mode_bend=0.5,
+                                extra_stickers=((EXTRA_COLOURS[0], 0.5), (EXTRA_COLOURS[1], 0.25)))
 # The paper's puzzle (issue 17): a servo of the paper's linear dynamics (ζ = 0.65, a 7 % overshoot)
 # whose linkage has 0.012 rad (0.69°) of play. Its step does not overshoot (the play holds the
 # blade at its first peak while the servo swings back), every sine's peaks flatten (the blade
