@@ -97,7 +97,7 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
         test = next(t for t in res.campaign.tests if t.label == r["video"])
         ref = dwell_heave(np.asarray(tt["time_s"]), (true_rel[2 + k] - 1.0) * np.asarray(tt["heave_px"]),
                           test.frequency_hz, input_start(test, res.tracks[test.label]), test.amplitude,
-                          res.sine_fits[test.label].window_s)
+                          res.sine_fits[test.label].window_s, mode=(res.modes[0].frequency_hz, res.modes[0].damping_ratio))
         assert abs(r["gain"] - ref.gain) < 3 * r["gain_stderr"], (r, ref)
         if r["amplitude_px"] > 0.1:
             assert abs(r["phase_deg"] - ref.phase_deg) < 3 * r["phase_stderr_deg"], (r, ref)
@@ -108,6 +108,20 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
     for key, value in (("frequency_hz", 9.0), ("damping_ratio", 0.03)):
         assert abs(hm[key] - value) < 3 * hm["stderr"][key], (key, hm)
     assert abs(hm["gain_px_per_rad"] - 40.0) < 3 * hm["gain_stderr_px_per_rad"]
+    # A step cut short after the servo settles cannot show the ring-down: said, with how long to record.
+    from dataclasses import replace
+
+    from servoscope.campaign.blade import axis_of, blade_modes, step_ringdown_warning
+
+    step_track = res.tracks["step"]
+    assert step_ringdown_warning(res.step, step_track, res.model, "step", res.modes) is None
+    cut = replace(step_track, valid=step_track.valid & (step_track.angle_time_s < res.step.t0_s + 0.6))
+    pivot = axis_of(res.tracks, res.sine_fits, step_track)
+    assert len(blade_modes(res.step, step_track, res.model, pivot)) == 1
+    assert blade_modes(res.step, cut, res.model, pivot) == []
+    others = [m for m in res.modes if m.source != "step"]
+    why = step_ringdown_warning(res.step, cut, res.model, "step", others)
+    assert why is not None and "too short to fit its ring-down; record at least" in why
     # The report's blade motions: the mode shape's table and frame.
     html = build_report(res)
     assert "Blade motions" in html and "Blade motions frame" in html and "relative to the lead" in html

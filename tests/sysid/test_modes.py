@@ -102,25 +102,30 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
     err = (h - np.median(h[:10])) - true_h
     assert np.std(true_h) > 0.3 and np.sqrt(np.nanmean(err**2)) < 0.05
     # Each dwell's heave at its input frequency (issue 18, build 2) against the renderer's, fitted alike:
-    # within 3 stated standard errors where it moved more than 0.1 px (the quick preset's short dwells
-    # state 5-10 %: the 2 % of the issue needs longer dwells or a larger flap).
+    # within 3 stated standard errors where it moved more than 0.1 px; on raw footage, where it moved
+    # 0.3 px or more, within the issue's 2 % and 2°, and stated so (H.264's 0.05 px floor states 10 %).
     from servoscope.campaign.result import input_start
     from servoscope.sysid.heave import dwell_heave
 
     rows = {r["video"]: r for r in s["heave_response"]}
     assert sorted(rows) == sorted(res.sine_fits)
-    checked = 0
+    checked = on_target = 0
     for test, tt in zip(res.campaign.tests, truth["tests"]):
         if test.kind != "sine" or rows[test.label]["amplitude_px"] < 0.1:
             continue
         track = res.tracks[test.label]
         ref = dwell_heave(np.asarray(tt["time_s"]), np.asarray(tt["heave_px"]), test.frequency_hz,
-                          input_start(test, track), test.amplitude, res.sine_fits[test.label].window_s)
+                          input_start(test, track), test.amplitude, res.sine_fits[test.label].window_s,
+                          mode=(res.modes[0].frequency_hz, res.modes[0].damping_ratio))
         row = rows[test.label]
         assert abs(row["gain"] - ref.gain) < 3 * row["gain_stderr"], (test.label, row, ref)
         assert abs(row["phase_deg"] - ref.phase_deg) < 3 * row["phase_stderr_deg"], (test.label, row, ref)
+        if codec == "raw" and row["amplitude_px"] > 0.3:
+            assert abs(row["gain"] / ref.gain - 1) < 0.02 and abs(row["phase_deg"] - ref.phase_deg) < 2.0
+            assert row["gain_stderr"] / row["gain"] < 0.02 and row["phase_stderr_deg"] < 2.0
+            on_target += 1
         checked += 1
-    assert checked >= 2
+    assert checked >= 2 and (on_target >= 2 or codec != "raw")
     from servoscope.report.build import build_report
 
     html = build_report(res)

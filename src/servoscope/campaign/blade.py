@@ -16,13 +16,13 @@ from ..angle.pivot import heave_px, pivot_motion
 from ..markers.track import marker_names
 from ..markers.tracker import Track
 from ..sysid import SineFit
-from ..sysid.heave import HEAVE_SYSTEMATIC_PX, HeaveModel, HeaveRow, dwell_heave, fit_heave_model
+from ..sysid.heave import HeaveModel, HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px
 from ..sysid.modes import ModeFit, fit_damped_mode, fit_mode_shape, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["HEAVE_MIN_Z", "axis_of", "bending_response", "blade_modes", "dwell_modes", "heave_model",
-           "heave_response"]
+__all__ = ["HEAVE_MIN_Z", "MIN_RINGDOWN_PERIODS", "axis_of", "bending_response", "blade_modes", "dwell_modes",
+           "heave_model", "heave_response", "step_ringdown_warning"]
 
 #: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
 HEAVE_MIN_Z = 5.0
@@ -48,9 +48,7 @@ def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str
     heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
     before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
     noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
-    settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
-    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
-    settled += 4.0 / decay if decay > 0 else 0.2
+    settled = _ringdown_start_s(step, model)
     mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
     if mode is None:
         return []
@@ -59,9 +57,39 @@ def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str
         # plus its own bending), its ring-down at the mode's frequency and damping.
         shape = fit_mode_shape(track.angle_time_s, heave[:, None] + track.bending_px, t0_s + settled, mode,
                                tuple(marker_names(len(track.extra_colours))), (*colours, *track.extra_colours),
-                               systematic_px=HEAVE_SYSTEMATIC_PX)
+                               systematic_px=heave_systematic_px(track.intra))
         mode = replace(mode, shape=shape)
     return [mode]
+
+
+def _ringdown_start_s(step, model) -> float:
+    """When the step's free motion starts, after t0: the servo settled, and four time constants more."""
+    settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
+    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
+    return settled + (4.0 / decay if decay > 0 else 0.2)
+
+
+#: The least free motion after the step that a mode is fitted to: this many of its periods.
+MIN_RINGDOWN_PERIODS = 4.0
+
+
+def step_ringdown_warning(step, track: Track | None, model, label: str, modes: list[ModeFit]) -> str | None:
+    """A warning when the blade rings (a mode seen in the dwells or the heave) but the step was too short to fit it.
+
+    None when the step gave a mode, or nothing rings, or the step's record after the servo
+    settles spans :data:`MIN_RINGDOWN_PERIODS` of the mode (then the ring-down was too small to see).
+    """
+    if step is None or track is None or not modes or any(m.source == "step" for m in modes):
+        return None
+    period = 1.0 / modes[0].frequency_hz
+    t = track.angle_time_s[track.valid]
+    span = float(t[-1] - step.t0_s - _ringdown_start_s(step, model)) if t.size else 0.0
+    if span >= MIN_RINGDOWN_PERIODS * period:
+        return None
+    need = _ringdown_start_s(step, model) + MIN_RINGDOWN_PERIODS * period
+    return (f"{label}: the blade rings at {modes[0].frequency_hz:.3g} Hz ({modes[0].source}), but the step records "
+            f"only {max(span, 0.0):.2g} s after the servo settles: too short to fit its ring-down; record at least "
+            f"{need:.2g} s after the input's start")
 
 
 def axis_of(tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Track | None):
@@ -111,8 +139,17 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
     return pool_modes(found, "dwells")
 
 
-def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot) -> list[HeaveRow]:
+def _mode_of(modes: list[ModeFit] | None) -> tuple[float, float] | None:
+    return None if not modes else (modes[0].frequency_hz, modes[0].damping_ratio)
+
+
+def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
+                   modes: list[ModeFit] | None = None) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
+
+    ``modes``: the blade's modes found (the step's first): the first one's ring-down is fitted
+    beside each dwell's sine (:func:`~servoscope.sysid.heave.dwell_heave`). The systematic floor
+    is the footage's (:func:`~servoscope.sysid.heave.heave_systematic_px`).
 
     ``pivot`` is the pitch axis (:func:`axis_of`: an axis found on a small swing is uncertain,
     and its error would read as heave at the input frequency). A campaign whose dwells show
@@ -123,7 +160,8 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
         return []
     rows = []
     for test, track, fit, t0, h in _dwell_heaves(campaign, tracks, fits, pivot):
-        row = dwell_heave(track.angle_time_s, h, test.frequency_hz, t0, test.amplitude, fit.window_s, test.label)
+        row = dwell_heave(track.angle_time_s, h, test.frequency_hz, t0, test.amplitude, fit.window_s, test.label,
+                          systematic_px=heave_systematic_px(track.intra), mode=_mode_of(modes))
         if row is not None:
             rows.append(row)
     if not any(r.gain >= HEAVE_MIN_Z * r.gain_stderr for r in rows):
@@ -131,12 +169,14 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     return rows
 
 
-def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit]) -> list[HeaveRow]:
+def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit],
+                     modes: list[ModeFit] | None = None) -> list[HeaveRow]:
     """Each extra marker's bending at each fitted dwell's input frequency (px per input unit, phase).
 
     A marker's bending is its distance across the lead–trail chord line from where it rests
     (:attr:`~servoscope.markers.Track.bending_px`); fitted as the heave is
-    (:func:`~servoscope.sysid.heave.dwell_heave`), one row per marker and dwell. Empty
+    (:func:`~servoscope.sysid.heave.dwell_heave`, with the first of ``modes``), one row per
+    marker and dwell. Empty
     without extra markers; with them, every row, measured or not (its error says which).
     """
     rows = []
@@ -148,7 +188,8 @@ def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[st
         names = marker_names(len(track.extra_colours))
         for k, colour in enumerate(track.extra_colours):
             row = dwell_heave(track.angle_time_s, track.bending_px[:, 2 + k], test.frequency_hz, t0, test.amplitude,
-                              fit.window_s, test.label, names[2 + k], colour or campaign.extra[k])
+                              fit.window_s, test.label, names[2 + k], colour or campaign.extra[k],
+                              systematic_px=heave_systematic_px(track.intra), mode=_mode_of(modes))
             if row is not None:
                 rows.append(row)
     return rows

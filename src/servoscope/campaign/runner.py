@@ -27,7 +27,8 @@ from ..sysid import (
     gain_against_amplitude,
     rigid_motion_null,
 )
-from .blade import axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response
+from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
+                    step_ringdown_warning)
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
@@ -515,10 +516,13 @@ def identify(
     modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
     from_dwells = dwell_modes(campaign, tracks, fits, pivot, model)
     modes += [from_dwells] if from_dwells is not None else []
-    heave = heave_response(campaign, tracks, fits, pivot)
-    bending = bending_response(campaign, tracks, fits)
+    heave = heave_response(campaign, tracks, fits, pivot, modes)
+    bending = bending_response(campaign, tracks, fits, modes)
     flapping = heave_model(campaign, heave, fits, modes)
     modes += [flapping.mode] if flapping is not None else []
+    short = step_ringdown_warning(step, step_track, model, step_label or "", modes)
+    if short:
+        warnings.append(short)
     warned: list[float] = []
     for mode in modes:
         if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):

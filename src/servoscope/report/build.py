@@ -436,7 +436,7 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
             curve = (f, np.abs(z), phase)
         s.figure(heave_figure(result.heave_response, result.modes, curve), "The blade's heave (the lead–trail "
                  "line's distance from the pitch axis) at each dwell's frequency, against the input: a blade that "
-                 "flaps answers most near its mode. Error bars: ±1 standard error, 0.05 px systematic included.",
+                 "flaps answers most near its mode. Error bars: ±1 standard error, a systematic floor included (0.005 px on footage of frames coded on their own, 0.05 px where the codec predicts frames, and 0.3 % of the amplitude).",
                  "Heave against frequency", name="heave")
     if result.bending_response:
         s.table(["marker", "dwell", "f (Hz)", "bending gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",

@@ -17,12 +17,26 @@ import numpy as np
 from ..results import jsonable
 from .hac import hac_covariance
 
-__all__ = ["HEAVE_SYSTEMATIC_PX", "HeaveModel", "HeaveRow", "dwell_heave", "fit_heave_model"]
+__all__ = ["HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_REL", "HeaveModel", "HeaveRow",
+           "dwell_heave", "fit_heave_model", "heave_systematic_px"]
 
-#: Systematic uncertainty of a dwell's heave amplitude, px, added to the fit's: a rigid blade
-#: (quick preset, 720×576, H.264, seed 3) showed 0.063 px at 1 Hz, 6 of the fit's standard
-#: errors: the axis found on the step, the lens and the codec leave that much apparent heave.
+#: Systematic uncertainty of a dwell's heave amplitude, px, added to the fit's, on footage whose
+#: codec predicts frames from others (H.264, MPEG-2): a rigid blade (quick preset, 720×576, H.264,
+#: seed 3) showed 0.021–0.063 px at its four dwells, 6–16 of the fit's standard errors: the codec
+#: holds the stickers' motion back, and the axis found on the step leaves apparent heave.
 HEAVE_SYSTEMATIC_PX = 0.05
+#: The same on footage of frames coded on their own (raw, image sequences, intra-only codecs): rigid
+#: blades (quick preset, raw, 720×576 and 480×384) showed 0.0009–0.0029 px, flapping ones
+#: 0.001–0.0035 px off the renderer's heave.
+HEAVE_SYSTEMATIC_INTRA_PX = 0.005
+#: ...plus this share of the amplitude: a 5.5 px heave at resonance (paper-bend, raw) read 0.13 % low.
+HEAVE_SYSTEMATIC_REL = 0.003
+
+
+def heave_systematic_px(intra: np.ndarray | None) -> float:
+    """The heave's systematic floor for a track: :data:`HEAVE_SYSTEMATIC_INTRA_PX` when every frame was coded on
+    its own (``Track.intra`` all true), else :data:`HEAVE_SYSTEMATIC_PX` (unknown counts as predicted)."""
+    return HEAVE_SYSTEMATIC_INTRA_PX if intra is not None and len(intra) and bool(np.all(intra)) else HEAVE_SYSTEMATIC_PX
 
 
 @dataclass(frozen=True)
@@ -71,18 +85,33 @@ class HeaveRow:
 
 
 def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s: float, amplitude: float,
-                window_s: tuple[float, float], label: str = "", marker: str = "", colour: str = "") -> HeaveRow | None:
+                window_s: tuple[float, float], label: str = "", marker: str = "", colour: str = "", *,
+                systematic_px: float = HEAVE_SYSTEMATIC_PX,
+                mode: tuple[float, float] | None = None) -> HeaveRow | None:
     """The heave's sine at ``frequency_hz`` in a dwell's steady window, by least squares with HAC errors.
 
-    The errors include :data:`HEAVE_SYSTEMATIC_PX` (in phase as that much displacement
-    across the amplitude); None with fewer than 10 samples in the window.
+    ``mode`` (frequency Hz, damping ratio): the blade's mode, whose free ring-down from the
+    dwell's start is still in the window; fitted beside the sine (its two decaying columns),
+    not left in the residual, where it swelled the quick preset's errors 10-fold. Left out
+    when the mode lies within a line width (1/window) of the dwell's frequency: there the two
+    cannot be told apart in the window. The errors include ``systematic_px`` and
+    :data:`HEAVE_SYSTEMATIC_REL` of the amplitude (in phase as that much displacement across
+    the amplitude); None with fewer than 10 samples in the window.
     """
     t, h = np.asarray(time_s, float), np.asarray(heave, float)
     inside = np.isfinite(h) & (t >= window_s[0]) & (t <= window_s[1])
     if np.count_nonzero(inside) < 10:
         return None
     w = 2.0 * math.pi * frequency_hz * (t[inside] - t0_s)
-    design = np.column_stack([np.sin(w), np.cos(w), np.ones_like(w)])
+    columns = [np.sin(w), np.cos(w), np.ones_like(w)]
+    span = float(window_s[1] - window_s[0])
+    if mode is not None and span > 0 and abs(mode[0] - frequency_hz) > 1.0 / span:
+        wn, z = 2.0 * math.pi * mode[0], mode[1]
+        tau = t[inside] - window_s[0]
+        env = np.exp(-z * wn * tau)
+        wd = wn * math.sqrt(max(1.0 - z * z, 0.0))
+        columns += [env * np.cos(wd * tau), env * np.sin(wd * tau)]
+    design = np.column_stack(columns)
     coef, *_ = np.linalg.lstsq(design, h[inside], rcond=None)
     cov = hac_covariance(design, h[inside] - design @ coef)
     a, b = float(coef[0]), float(coef[1])
@@ -93,8 +122,9 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
     ga = np.array([a, b]) / amp
     gp = np.array([-b, a]) / amp**2
     c2 = cov[:2, :2]
-    se_amp = math.hypot(math.sqrt(max(float(ga @ c2 @ ga), 0.0)), HEAVE_SYSTEMATIC_PX)
-    se_phase = math.hypot(math.sqrt(max(float(gp @ c2 @ gp), 0.0)), HEAVE_SYSTEMATIC_PX / amp)
+    floor = math.hypot(systematic_px, HEAVE_SYSTEMATIC_REL * amp)
+    se_amp = math.hypot(math.sqrt(max(float(ga @ c2 @ ga), 0.0)), floor)
+    se_phase = math.hypot(math.sqrt(max(float(gp @ c2 @ gp), 0.0)), floor / amp)
     return HeaveRow(label, float(frequency_hz), amp / abs(amplitude), se_amp / abs(amplitude),
                     math.degrees(math.atan2(b, a)), math.degrees(se_phase), amp, marker, colour)
 
