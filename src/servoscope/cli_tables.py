@@ -10,7 +10,7 @@ import math
 
 import click
 
-__all__ = ["fmt", "print_model", "print_servo_model"]
+__all__ = ["fmt", "print_blade_motions", "print_model", "print_servo_model"]
 
 
 def print_model(result, truth: dict | None = None) -> None:
@@ -73,6 +73,8 @@ def print_model(result, truth: dict | None = None) -> None:
     Console(highlight=False, width=112).print(table)
     if result.servo_model is not None:
         print_servo_model(result, truth)
+    if result.modes:
+        print_blade_motions(result, truth)
     # Warnings to stderr, as `track` does: the table on stdout stays what a script parses.
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
@@ -106,6 +108,48 @@ def print_servo_model(result, truth: dict | None) -> None:
     console.print(table)
     console.print(params)
     console.print(f"cross-validation: {result.servo_model.cross_validation.get('verdict')}")
+
+
+def print_blade_motions(result, truth: dict | None) -> None:
+    """The blade's modes (each source), the first shape across the markers, the flapping response's fit."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .report.numbers import format_interval, format_with_uncertainty
+
+    true = ((truth or {}).get("modes") or [{}])[0]
+    table = Table(title="the blade's modes (its heave across the chord)")
+    for col in ("from", "frequency (Hz)", "95 % interval", "damping ratio", "95 % interval",
+                *(("truth",) if true else ())):
+        table.add_column(col, justify="right")
+    for m in result.modes:
+        f, fe = format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)
+        z, ze = format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr)
+        table.add_row(m.source, f"{f} ± {fe}",
+                      format_interval(m.frequency_hz - 1.96 * m.frequency_stderr_hz,
+                                      m.frequency_hz + 1.96 * m.frequency_stderr_hz, m.frequency_stderr_hz),
+                      f"{z} ± {ze}",
+                      format_interval(m.damping_ratio - 1.96 * m.damping_ratio_stderr,
+                                      m.damping_ratio + 1.96 * m.damping_ratio_stderr, m.damping_ratio_stderr),
+                      *((f"{fmt(true.get('frequency_hz'))} Hz, {fmt(true.get('damping_ratio'))}",) if true else ()))
+    console = Console(highlight=False, width=112)
+    console.print(table)
+    shaped = next((m for m in result.modes if m.shape is not None), None)
+    if shaped is not None:
+        sh = shaped.shape
+        shape = Table(title=f"its shape at {shaped.frequency_hz:.4g} Hz: each marker's ring-down across the chord line")
+        for col in ("marker", "colour", "amplitude (px)", "relative to the lead", "phase (deg)"):
+            shape.add_column(col, justify="right")
+        for m, c, a, sa, r, p, sp in zip(sh.markers, sh.colours, sh.amplitude_px, sh.amplitude_stderr_px,
+                                         sh.relative(), sh.phase_deg, sh.phase_stderr_deg):
+            shape.add_row(m, c, " ± ".join(format_with_uncertainty(a, sa)), f"{r:.3f}",
+                          " ± ".join(format_with_uncertainty(p, sp)))
+        console.print(shape)
+    if result.heave_model is not None:
+        hm = result.heave_model
+        console.print(f"flapping response fitted over {hm.n_dwells} dwells: heave/pitch = κ·ω²/(ωm² − ω² + 2jζωm·ω), "
+                      f"κ = {' ± '.join(format_with_uncertainty(hm.gain_px_per_rad, hm.gain_stderr_px_per_rad))} "
+                      "px/rad")
 
 
 def fmt(value) -> str:
