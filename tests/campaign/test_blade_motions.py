@@ -159,7 +159,7 @@ def test_extra_markers_bad_input(tmp_path):
     # The manifest says which entry is wrong.
     text = toml.read_text()
     for bad, why in (('extra = ["#1f77b4", "#1f77b4"]', r"markers.extra\[1\].*colour of its own"),
-                     ('extra = ["#2ca02c"]', r"markers.extra\[0\].*trail's colour"),
+                     ('extra = ["#2ca02c"]', r"markers.extra\[0\].*same colour as the trail"),
                      ('extra = "#1f77b4"', "markers.extra: the colours"),
                      ('extra = ["nonsense-colour"]', r"markers.extra\[0\]")):
         (tmp_path / "bad.toml").write_text(text.replace('extra = ["#1f77b4"]', bad))

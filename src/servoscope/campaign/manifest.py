@@ -20,6 +20,7 @@ from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
 from ..markers.selection import check_near
+from ..markers.settings import extra_marker_problems
 from ..video.frame_source import MANIFEST_KEYS, manifest_frame_source, source_name
 
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
@@ -210,31 +211,10 @@ def _extra_markers(markers_t: dict, colours: dict, reference, problems) -> tuple
     if not (isinstance(extra, list) and extra and all(isinstance(c, str) for c in extra)):
         problems.add("markers.extra", "the colours of more stickers on the blade: extra = [\"#rrggbb\", ...]")
         return ()
-    taken = {k: colours.get(k) for k in ("lead", "trail", "led")}
-    taken.update({f"reference[{i}]": c for i, c in enumerate(reference or ())})
-    seen: dict[tuple, str] = {}
-    for name, colour in taken.items():
-        try:
-            spec = parse_colour(colour, what="colour") if isinstance(colour, str) else None
-        except ServoscopeError:
-            continue
-        if isinstance(spec, tuple):
-            seen[tuple(round(float(c)) for c in spec)] = name
-    for i, colour in enumerate(extra):
-        try:
-            spec = parse_colour(colour, what="colour")
-        except ServoscopeError as exc:
-            problems.add(f"markers.extra[{i}]", str(exc).removeprefix("colour: "))
-            continue
-        if not isinstance(spec, tuple):
-            problems.add(f"markers.extra[{i}]", f"{colour!r}: extra markers are told by colour; give \"#rrggbb\" "
-                         "or a CSS name")
-            continue
-        key = tuple(round(float(c)) for c in spec)
-        if key in seen:
-            problems.add(f"markers.extra[{i}]", f"{colour} is also the {seen[key]}'s colour: give each sticker a "
-                         "colour of its own")
-        seen[key] = f"extra[{i}]"
+    others = {f"the {k}": colours.get(k) for k in ("lead", "trail", "led")}
+    others.update({f"reference[{i}]": c for i, c in enumerate(reference or ())})
+    for i, why in extra_marker_problems(extra, others):
+        problems.add(f"markers.extra[{i}]", why)
     return tuple(str(c) for c in extra)
 
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 from ..camera.model import CameraModel
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
-from .colour import BRIGHTNESS
+from .colour import BRIGHTNESS, parse_colour
 
-__all__ = ["BACKENDS", "ENGINES", "TrackerSettings", "resolve_engine"]
+__all__ = ["BACKENDS", "ENGINES", "TrackerSettings", "extra_marker_problems", "resolve_engine"]
 
 
 @dataclass(frozen=True)
@@ -148,3 +148,36 @@ def resolve_engine(settings: TrackerSettings) -> str:
     if settings.engine == "auto":
         return "reference-rgb" if settings.centroid == "projected" or brightness else "numba"
     return settings.engine
+
+
+def extra_marker_problems(extra, others: dict[str, object]) -> list[tuple[int, str]]:
+    """What is wrong with extra markers' colours: ``(index, problem)`` for each that cannot be told apart.
+
+    An extra marker must be a colour (not ``"auto"`` or a brightness), and not the colour
+    of another marker: ``others`` names them (``{"the lead marker": "#d62728", …}``; values
+    that are not colours are skipped), and each extra marker is another's for the ones after
+    it. One home for the tracker's refusal and the manifest's problems.
+    """
+    seen: dict[tuple, str] = {}
+    for name, colour in others.items():
+        try:
+            spec = parse_colour(colour, what="colour") if isinstance(colour, str) else None
+        except ServoscopeError:
+            continue
+        if isinstance(spec, tuple):
+            seen[tuple(round(float(c)) for c in spec)] = name
+    problems = []
+    for k, colour in enumerate(extra):
+        try:
+            spec = parse_colour(colour, what="colour") if isinstance(colour, str) else None
+        except ServoscopeError as exc:
+            problems.append((k, str(exc).removeprefix("colour: ")))
+            continue
+        if not isinstance(spec, tuple):
+            problems.append((k, f"{colour!r}: extra markers are told by colour; give \"#rrggbb\" or a CSS name"))
+            continue
+        key = tuple(round(float(c)) for c in spec)
+        if key in seen:
+            problems.append((k, f"{colour} has the same colour as {seen[key]}: give each marker a colour of its own"))
+        seen[key] = f"extra marker {k + 1}"
+    return problems

@@ -43,7 +43,7 @@ from .led_level import input_start
 from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s
 from .marker_state import MarkerTracker
 from .rgb_engine import run_rgb
-from .settings import BACKENDS, ENGINES, TrackerSettings, resolve_engine
+from .settings import BACKENDS, ENGINES, TrackerSettings, extra_marker_problems, resolve_engine
 from .timebase import frame_timing
 from .track import Track
 from .yuv_engine import run_yuv
@@ -187,24 +187,10 @@ def _against_reference(path: Path, settings: TrackerSettings, track: Track) -> T
 
 def _check_extra(settings: TrackerSettings) -> None:
     """Refuse extra markers that cannot be told apart: not a colour, or another marker's colour."""
-    named = {"the lead marker": settings.lead, "the trail marker": settings.trail,
-             **({"the LED": settings.led} if settings.led else {}),
-             **({f"reference sticker {i + 1}": c for i, c in enumerate(settings.reference or ())})}
-    seen: dict[tuple, str] = {}
-    for name, colour in named.items():
-        spec = parse_colour(colour, what=f"{name}'s colour") if colour not in ("auto",) else None
-        if isinstance(spec, tuple):
-            seen[tuple(round(float(c)) for c in spec)] = name
-    for k, colour in enumerate(settings.extra):
-        what = f"extra marker {k + 1} ({colour})"
-        spec = parse_colour(colour, what=f"{what} colour")
-        if not isinstance(spec, tuple):
-            raise ServoscopeError(f"{what}: extra markers are told by colour; give \"#rrggbb\" or a CSS name, "
-                                  f"not {colour!r}")
-        key = tuple(round(float(c)) for c in spec)
-        if key in seen:
-            raise ServoscopeError(f"{what} has the same colour as {seen[key]}: give each marker a colour of its own")
-        seen[key] = f"extra marker {k + 1}"
+    others = {"the lead marker": settings.lead, "the trail marker": settings.trail, "the LED": settings.led,
+              **{f"reference sticker {i + 1}": c for i, c in enumerate(settings.reference or ())}}
+    for k, why in extra_marker_problems(settings.extra, others):
+        raise ServoscopeError(f"extra marker {k + 1}: {why}")
 
 
 def _as_extra(text: str, names: tuple[str, str]) -> str:
