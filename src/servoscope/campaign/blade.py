@@ -176,8 +176,8 @@ def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[st
     A marker's bending is its distance across the lead–trail chord line from where it rests
     (:attr:`~servoscope.markers.Track.bending_px`); fitted as the heave is
     (:func:`~servoscope.sysid.heave.dwell_heave`, with the first of ``modes``), one row per
-    marker and dwell. Empty
-    without extra markers; with them, every row, measured or not (its error says which).
+    marker and dwell. Empty without extra markers; with them, every row, measured or not
+    (its error says which).
     """
     rows = []
     for test in campaign.sine_tests:

@@ -206,11 +206,11 @@ EXTRA_JUMP_MIN_PX = 2.0
 
 
 def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
-    """Track the extra markers and fit the blade's rigid motion to all markers (:func:`~servoscope.angle.rigid_motion`).
+    """Track the extra markers and measure each one's bending across the chord line (:func:`~servoscope.angle.rigid_motion`).
 
     The extra markers are tracked two at a time by passes of their own over the video,
     each pair as a pair of markers (colour models, sub-pixel moments, rigid check); an
-    odd one out is paired with the lead marker (pinned where the first pass pinned it).
+    odd one out is paired with the lead marker (pinned where the user pinned it).
     A frame is valid when every marker is; the motion is fitted to the lead and trail
     markers (the chord line: the angle and the heave stay the two-marker ones), and each
     marker's residual across that line is its bending. A pass that finds an extra
@@ -246,11 +246,18 @@ def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
         for i in np.flatnonzero(track.valid & ~got.valid):
             valid[i] = False
             reasons[i] = reasons[i] or _as_extra(got.reason[i] or "not measured", names_in_pass)
-        warnings += [_as_extra(w, names_in_pass) for w in got.warnings
-                     if not w.startswith(("LED", "no LED"))]
+        # The pass's own warnings, less what the first pass said already (illumination, timing).
+        warnings += [w for w in (_as_extra(w, names_in_pass) for w in got.warnings
+                                 if not w.startswith(("LED", "no LED"))) if w not in warnings]
     _refuse_coinciding(path, track, xy, extras)
     points = np.concatenate([track.lead_xy_px[:, None], track.trail_xy_px[:, None], xy], axis=1)
     sig = np.concatenate([track.lead_sigma_px[:, None], track.trail_sigma_px[:, None], sigma], axis=1)
+    if not valid.any():
+        # Nothing to fit: the track stands, every frame invalid, saying why.
+        return replace(track, angle_rad=np.full(n, np.nan), angle_sigma_rad=np.full(n, np.nan), valid=valid,
+                       reason=reasons, warnings=warnings + ["no frame has every marker (the extra markers included)"],
+                       extra_colours=tuple(extras), extra_xy_px=xy, extra_sigma_px=sigma,
+                       bending_px=np.full((n, 2 + len(extras)), np.nan))
     fit = rigid_motion(points, sig, valid, fit_markers=2)
     # A wrong blob in a frame (an extra marker's colour met elsewhere) leaves it off the rigid motion.
     resid = np.hypot(fit.bending_px, fit.along_px)
@@ -263,14 +270,13 @@ def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
             reasons[i] = reasons[i] or "a marker left the blade's rigid motion (wrong blob?)"
         warnings.append(f"{int(jumped.sum())} frames had a marker off the blade's rigid motion by more than "
                         f"{EXTRA_JUMP_MIN_PX:g} px and {EXTRA_JUMP_SPREADS:g} spreads: left out")
-        fit = rigid_motion(points, sig, valid, fit_markers=2)
-    if not valid.any():
-        warnings.append("no frame has every marker")
+        if valid.any():
+            fit = rigid_motion(points, sig, valid, fit_markers=2)
     # The pitch and its uncertainty stay the chord line's (the fit's own, bit for bit): only frames change.
     return replace(track, angle_rad=np.where(valid, track.angle_rad, np.nan),
                    angle_sigma_rad=np.where(valid, track.angle_sigma_rad, np.nan), valid=valid, reason=reasons,
                    warnings=warnings, extra_colours=tuple(extras), extra_xy_px=xy, extra_sigma_px=sigma,
-                   bending_px=fit.bending_px)
+                   bending_px=np.where(valid[:, None], fit.bending_px, np.nan))
 
 
 def _refuse_coinciding(path: Path, track: Track, xy: np.ndarray, extras: list[str]) -> None:
