@@ -134,8 +134,7 @@ def print_blade_motions(result, truth: dict | None) -> None:
                       *((f"{fmt(true.get('frequency_hz'))} Hz, {fmt(true.get('damping_ratio'))}",) if true else ()))
     console = Console(highlight=False, width=112)
     console.print(table)
-    shaped = next((m for m in result.modes if m.shape is not None), None)
-    if shaped is not None:
+    for shaped in (m for m in result.modes if m.shape is not None):
         sh = shaped.shape
         shape = Table(title=f"its shape at {shaped.frequency_hz:.4g} Hz: each marker's ring-down across the chord line")
         for col in ("marker", "colour", "amplitude (px)", "relative to the lead", "phase (deg)"):
@@ -147,9 +146,10 @@ def print_blade_motions(result, truth: dict | None) -> None:
         console.print(shape)
     if result.heave_model is not None:
         hm = result.heave_model
-        console.print(f"flapping response fitted over {hm.n_dwells} dwells: heave/pitch = κ·ω²/(ωm² − ω² + 2jζωm·ω), "
-                      f"κ = {' ± '.join(format_with_uncertainty(hm.gain_px_per_rad, hm.gain_stderr_px_per_rad))} "
-                      "px/rad")
+        kappas = ", ".join(f"{' ± '.join(format_with_uncertainty(k, kse))} px/rad at {m.frequency_hz:.4g} Hz"
+                           for k, kse, m in zip(hm.gains_px_per_rad, hm.gain_stderrs_px_per_rad, hm.modes))
+        console.print(f"flapping response fitted over {hm.n_dwells} dwells: heave/pitch = Σ κ·ω²/(ωm² − ω² + "
+                      f"2jζωm·ω), κ = {kappas}")
 
 
 def fmt(value) -> str:

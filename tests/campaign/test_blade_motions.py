@@ -63,30 +63,38 @@ def test_extra_markers_bend_as_rendered_and_leave_the_pitch_alone(tmp_path):
 
 
 def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
+    """Two modes: the 9 Hz one bending the middle less, a 21 Hz one (2 % damping) bending it more."""
     from servoscope.campaign import IdentificationResult
     from servoscope.campaign.result import input_start
     from servoscope.campaign.runner import identify
     from servoscope.report.build import build_report
     from servoscope.sysid.heave import dwell_heave
 
-    toml, truth = _render(tmp_path)
+    toml, truth = _render(tmp_path, blade_mode2=(21.0, 0.02, 40.0, -1.0))
     assert 'extra = ["#1f77b4", "#9467bd"]' in toml.read_text()
     res = identify(toml, workers=1)
     s = res.summary()
     assert s["extra_markers"] == ["#1f77b4", "#9467bd"]
-    step_mode = next(m for m in res.modes if m.source == "step")
-    assert step_mode.frequency_hz == pytest.approx(9.0, rel=0.01) and step_mode.damping_ratio == pytest.approx(0.03, rel=0.15)
-    # Which markers move, and how: each one's share of the mode against the renderer's, within 3 σ.
-    shape = step_mode.shape
-    assert shape.markers == ("lead", "trail", "extra1", "extra2")
-    assert shape.colours[2:] == ("#1f77b4", "#9467bd")
-    rel = shape.relative()
-    true_rel = [1.0, 1.0, 0.5, 0.625]
-    for k in (2, 3):
-        se = rel[k] * np.hypot(shape.amplitude_stderr_px[k] / shape.amplitude_px[k],
-                               shape.amplitude_stderr_px[0] / shape.amplitude_px[0])
-        assert abs(rel[k] - true_rel[k]) < 3 * se and abs(rel[k] - true_rel[k]) < 0.03, (k, rel[k], se)
-        assert abs(shape.phase_deg[k]) < 3 * shape.phase_stderr_deg[k] + 1e-9
+    # Both modes from the step alone (strongest first), the issue's 1 % and 15 %, intervals holding the truth.
+    step_modes = [m for m in res.modes if m.source == "step"]
+    assert [round(m.frequency_hz) for m in step_modes] == [9, 21]
+    true_modes = truth["modes"]
+    for mode, true in zip(step_modes, true_modes):
+        assert mode.frequency_hz == pytest.approx(true["frequency_hz"], rel=0.01)
+        assert mode.damping_ratio == pytest.approx(true["damping_ratio"], rel=0.15)
+        assert abs(mode.frequency_hz - true["frequency_hz"]) < 3 * mode.frequency_stderr_hz
+        assert abs(mode.damping_ratio - true["damping_ratio"]) < 3 * mode.damping_ratio_stderr
+        # Which markers move, and how: each one's share of the mode against the renderer's, within 3 σ.
+        shape = mode.shape
+        assert shape.markers == ("lead", "trail", "extra1", "extra2")
+        assert shape.colours[2:] == ("#1f77b4", "#9467bd")
+        rel = shape.relative()
+        true_rel = [1.0, 1.0, *true["shape"]["extra"]]
+        for k in (2, 3):
+            se = abs(rel[k]) * np.hypot(shape.amplitude_stderr_px[k] / shape.amplitude_px[k],
+                                        shape.amplitude_stderr_px[0] / shape.amplitude_px[0])
+            assert abs(rel[k] - true_rel[k]) < 3 * se and abs(rel[k] / true_rel[k] - 1) < 0.05, (k, rel[k], se)
+            assert abs(shape.phase_deg[k]) < 3 * shape.phase_stderr_deg[k] + 1e-9
     # Each marker's bending per dwell against the renderer's, fitted alike, within 3 stated errors.
     rows = s["bending_response"]
     assert {(r["marker"], r["video"]) for r in rows} == {(m, t) for m in ("extra1", "extra2") for t in res.sine_fits}
@@ -95,19 +103,24 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
         k = int(r["marker"][-1]) - 1
         tt = next(t for t in truth["tests"] if t["video"].startswith(r["video"]))
         test = next(t for t in res.campaign.tests if t.label == r["video"])
-        ref = dwell_heave(np.asarray(tt["time_s"]), (true_rel[2 + k] - 1.0) * np.asarray(tt["heave_px"]),
-                          test.frequency_hz, input_start(test, res.tracks[test.label]), test.amplitude,
-                          res.sine_fits[test.label].window_s, mode=(res.modes[0].frequency_hz, res.modes[0].damping_ratio))
+        # The marker's bending: each mode's heave times its share there less the chord line's.
+        bend = sum((m["shape"]["extra"][k] - 1.0) * np.asarray(q) for m, q in zip(true_modes, tt["mode_heave_px"]))
+        ref = dwell_heave(np.asarray(tt["time_s"]), bend, test.frequency_hz, input_start(test, res.tracks[test.label]),
+                          test.amplitude, res.sine_fits[test.label].window_s,
+                          mode=[(m.frequency_hz, m.damping_ratio) for m in step_modes])
         assert abs(r["gain"] - ref.gain) < 3 * r["gain_stderr"], (r, ref)
         if r["amplitude_px"] > 0.1:
             assert abs(r["phase_deg"] - ref.phase_deg) < 3 * r["phase_stderr_deg"], (r, ref)
             checked += 1
     assert checked >= 2
-    # The flapping response fitted as a mode: its interval holds the renderer's.
+    # The flapping response fitted as modes: the first's intervals hold the renderer's; the quick preset's four
+    # dwells cannot tell the second's frequency and damping, held at the step's (only its κ fitted).
     hm = s["heave_model"]
     for key, value in (("frequency_hz", 9.0), ("damping_ratio", 0.03)):
         assert abs(hm[key] - value) < 3 * hm["stderr"][key], (key, hm)
-    assert abs(hm["gain_px_per_rad"] - 40.0) < 3 * hm["gain_stderr_px_per_rad"]
+    for term in hm["modes"]:
+        assert abs(term["gain_px_per_rad"] - 40.0) < 3 * term["gain_stderr_px_per_rad"], term
+    assert [t.get("held", False) for t in hm["modes"]] == [False, True]
     # A step cut short after the servo settles cannot show the ring-down: said, with how long to record.
     from dataclasses import replace
 
@@ -117,7 +130,7 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
     assert step_ringdown_warning(res.step, step_track, res.model, "step", res.modes) is None
     cut = replace(step_track, valid=step_track.valid & (step_track.angle_time_s < res.step.t0_s + 0.6))
     pivot = axis_of(res.tracks, res.sine_fits, step_track)
-    assert len(blade_modes(res.step, step_track, res.model, pivot)) == 1
+    assert len(blade_modes(res.step, step_track, res.model, pivot)) == 2
     assert blade_modes(res.step, cut, res.model, pivot) == []
     others = [m for m in res.modes if m.source != "step"]
     why = step_ringdown_warning(res.step, cut, res.model, "step", others)

@@ -194,3 +194,27 @@ def test_the_flapping_response_fitted_as_a_mode():
     assert back.ratio(np.array([5.0])) == pytest.approx(model.ratio(np.array([5.0])))
     # Two dwells cannot tell three parameters.
     assert fit_heave_model(rows[:2], pitch) is None
+
+
+def test_two_ring_downs_are_told_apart():
+    """A 9 Hz and a 21 Hz ring-down in one signal: both found, strongest first; one alone stays one."""
+    from servoscope.sysid.modes import fit_damped_mode, fit_damped_modes
+
+    rng = np.random.default_rng(11)
+    t = np.arange(200) * 0.01
+
+    def ring(a, f, z, phase):
+        wn = 2 * math.pi * f
+        return a * np.exp(-z * wn * t) * np.cos(wn * math.sqrt(1 - z * z) * t + phase)
+
+    y = ring(1.2, 9.0, 0.03, 0.3) + ring(0.4, 21.0, 0.02, 1.0) + 3.0 + 0.01 * rng.standard_normal(t.size)
+    found = fit_damped_modes(t, y, 0.0, noise=0.01)
+    assert [round(m.frequency_hz) for m in found] == [9, 21]
+    for m, (f, z) in zip(found, ((9.0, 0.03), (21.0, 0.02))):
+        assert abs(m.frequency_hz - f) < 3 * m.frequency_stderr_hz and abs(m.damping_ratio - z) < 3 * m.damping_ratio_stderr
+    # Beside a forced sine (a dwell), too.
+    forced = fit_damped_modes(t, y + 0.8 * np.sin(2 * math.pi * 5.24 * t), 0.0, noise=0.01, forced_hz=5.24)
+    assert [round(m.frequency_hz) for m in forced] == [9, 21]
+    # One mode and noise: one mode, the same as fitted alone.
+    one = ring(1.2, 9.0, 0.03, 0.3) + 0.01 * rng.standard_normal(t.size)
+    assert fit_damped_modes(t, one, 0.0, noise=0.01) == [fit_damped_mode(t, one, 0.0, noise=0.01)]

@@ -17,7 +17,7 @@ from ..markers.track import marker_names
 from ..markers.tracker import Track
 from ..sysid import SineFit
 from ..sysid.heave import HeaveModel, HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px
-from ..sysid.modes import ModeFit, fit_damped_mode, fit_mode_shape, pool_modes
+from ..sysid.modes import ModeFit, fit_damped_modes, fit_mode_shapes, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
@@ -29,9 +29,10 @@ HEAVE_MIN_Z = 5.0
 
 
 def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str] = ("", "")) -> list[ModeFit]:
-    """The blade's structural mode from its heave after the step has settled (see :mod:`servoscope.sysid.modes`).
+    """The blade's structural modes (one or two, strongest first) from its heave after the step has settled
+    (:func:`~servoscope.sysid.modes.fit_damped_modes`).
 
-    With extra markers the mode gets its shape (:func:`~servoscope.sysid.modes.fit_mode_shape`):
+    With extra markers each mode gets its shape (:func:`~servoscope.sysid.modes.fit_mode_shapes`):
     each marker's ring-down across the chord line; ``colours`` are the lead's and trail's.
 
     The heave is the markers' line's distance from the pitch axis
@@ -49,17 +50,15 @@ def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str
     before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
     noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
     settled = _ringdown_start_s(step, model)
-    mode = fit_damped_mode(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
-    if mode is None:
-        return []
-    if track.bending_px is not None:
-        # Which markers move in it: each one's distance across the chord line (the line's heave
-        # plus its own bending), its ring-down at the mode's frequency and damping.
-        shape = fit_mode_shape(track.angle_time_s, heave[:, None] + track.bending_px, t0_s + settled, mode,
-                               tuple(marker_names(len(track.extra_colours))), (*colours, *track.extra_colours),
-                               systematic_px=heave_systematic_px(track.intra))
-        mode = replace(mode, shape=shape)
-    return [mode]
+    modes = fit_damped_modes(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
+    if modes and track.bending_px is not None:
+        # Which markers move in each: each one's distance across the chord line (the line's heave
+        # plus its own bending), its ring-downs at the modes' frequencies and dampings.
+        shapes = fit_mode_shapes(track.angle_time_s, heave[:, None] + track.bending_px, t0_s + settled, modes,
+                                 tuple(marker_names(len(track.extra_colours))), (*colours, *track.extra_colours),
+                                 systematic_px=heave_systematic_px(track.intra))
+        modes = [replace(m, shape=sh) for m, sh in zip(modes, shapes)] if shapes else modes
+    return modes
 
 
 def _ringdown_start_s(step, model) -> float:
@@ -114,40 +113,58 @@ def _dwell_heaves(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, 
 
 
 def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
-                model) -> ModeFit | None:
+                model, known: list[ModeFit] | None = None) -> list[ModeFit]:
     """The blade's mode from the dwells: each one's heave rings down after its sine starts, beside the forced motion.
 
     Each dwell's heave is fitted, from the servo's settling on (its dead time and four time
     constants 1/(ζ·ωn) after the input's start), as a ring-down plus a sine at the dwell's
     frequency (:func:`~servoscope.sysid.modes.fit_damped_mode` with ``forced_hz``); a dwell
     within the mode's resonance (3ζ + 2 % of its frequency) is left out, its free and forced
-    motions one; the rest are pooled (:func:`~servoscope.sysid.modes.pool_modes`). ``pivot``
-    is the pitch axis (:func:`axis_of`).
+    motions one; the rest are pooled (:func:`~servoscope.sysid.modes.pool_modes`), each with the
+    ``known`` mode (the step's) it is nearest to within 10 %, or, without known modes, with the
+    ones within 10 % of it. As many modes are looked for in a dwell as are known (at least one).
+    ``pivot`` is the pitch axis (:func:`axis_of`).
     """
     if pivot is None:
-        return None
+        return []
     decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
     settle = (model.dead_time_s or 0.0) + (4.0 / decay if decay > 0 and math.isfinite(decay) else 0.3)
     found = []
     for test, track, _, t0, heave in _dwell_heaves(campaign, tracks, fits, pivot):
         before = heave[(track.angle_time_s < t0) & np.isfinite(heave)]
         noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
-        mode = fit_damped_mode(track.angle_time_s, heave, t0 + settle, noise=noise, source="dwells",
-                               forced_hz=test.frequency_hz)
-        if mode is not None and abs(test.frequency_hz / mode.frequency_hz - 1.0) >= 3.0 * mode.damping_ratio + 0.02:
-            found.append(mode)
-    return pool_modes(found, "dwells")
+        for mode in fit_damped_modes(track.angle_time_s, heave, t0 + settle, noise=noise, source="dwells",
+                                     forced_hz=test.frequency_hz, max_modes=max(1, len(known or []))):
+            if abs(test.frequency_hz / mode.frequency_hz - 1.0) >= 3.0 * mode.damping_ratio + 0.02:
+                found.append(mode)
+    groups: list[list[ModeFit]] = []
+    if known:
+        groups = [[] for _ in known]
+        for mode in found:
+            gap = [abs(mode.frequency_hz / k.frequency_hz - 1.0) for k in known]
+            if min(gap) < 0.1:
+                groups[int(np.argmin(gap))].append(mode)
+    else:
+        for mode in sorted(found, key=lambda m: m.frequency_hz):
+            if groups and mode.frequency_hz / groups[-1][0].frequency_hz - 1.0 < 0.1:
+                groups[-1].append(mode)
+            else:
+                groups.append([mode])
+    return [p for p in (pool_modes(g, "dwells") for g in groups) if p is not None]
 
 
-def _mode_of(modes: list[ModeFit] | None) -> tuple[float, float] | None:
-    return None if not modes else (modes[0].frequency_hz, modes[0].damping_ratio)
+def _mode_of(modes: list[ModeFit] | None) -> list[tuple[float, float]] | None:
+    """The blade's modes to fit beside a dwell's sine: those of the first source that found any (the step's)."""
+    if not modes:
+        return None
+    return [(m.frequency_hz, m.damping_ratio) for m in modes if m.source == modes[0].source]
 
 
 def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
                    modes: list[ModeFit] | None = None) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
 
-    ``modes``: the blade's modes found (the step's first): the first one's ring-down is fitted
+    ``modes``: the blade's modes found (the step's first): their ring-downs are fitted
     beside each dwell's sine (:func:`~servoscope.sysid.heave.dwell_heave`). The systematic floor
     is the footage's (:func:`~servoscope.sysid.heave.heave_systematic_px`).
 
@@ -198,8 +215,8 @@ def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[st
 def heave_model(campaign: Campaign, rows: list[HeaveRow], fits: dict[str, SineFit],
                 modes: list[ModeFit]) -> HeaveModel | None:
     """The flapping frequency response fitted (:func:`~servoscope.sysid.heave.fit_heave_model`): each dwell's
-    heave over its pitch, started from the first mode found (the step's) when there is one; None when the
-    dwells cannot tell it."""
+    heave over its pitch, one term per mode found (the step's) started there; None when the dwells cannot
+    tell it."""
     if not rows:
         return None
     pitch = {}
@@ -208,4 +225,4 @@ def heave_model(campaign: Campaign, rows: list[HeaveRow], fits: dict[str, SineFi
         if fit is not None and fit.phase_rad is not None and test.amplitude:
             a = abs(test.amplitude)
             pitch[test.label] = (fit.amplitude / a, fit.amplitude_stderr / a, fit.phase_rad, fit.phase_stderr_rad or 0.0)
-    return fit_heave_model(rows, pitch, modes[0].frequency_hz if modes else None)
+    return fit_heave_model(rows, pitch, _mode_of(modes))

@@ -514,12 +514,11 @@ def identify(
     step_track = tracks[step_label] if step_label else None
     pivot = axis_of(tracks, fits, step_track)
     modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
-    from_dwells = dwell_modes(campaign, tracks, fits, pivot, model)
-    modes += [from_dwells] if from_dwells is not None else []
+    modes += dwell_modes(campaign, tracks, fits, pivot, model, modes)
     heave = heave_response(campaign, tracks, fits, pivot, modes)
     bending = bending_response(campaign, tracks, fits, modes)
     flapping = heave_model(campaign, heave, fits, modes)
-    modes += [flapping.mode] if flapping is not None else []
+    modes += [m for m in flapping.modes if m.source == "heave_response"] if flapping is not None else []
     short = step_ringdown_warning(step, step_track, model, step_label or "", modes)
     if short:
         warnings.append(short)

@@ -397,15 +397,16 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
                   format_interval(m.damping_ratio - 1.96 * m.damping_ratio_stderr,
                                   m.damping_ratio + 1.96 * m.damping_ratio_stderr, m.damping_ratio_stderr)]
                  for m in result.modes])
-    shaped = next((m for m in result.modes if m.shape is not None), None)
-    if shaped is not None:
-        sh = shaped.shape
-        s.table([f"marker (mode at {shaped.frequency_hz:.3g} Hz)", "colour", "amplitude (px)", "± s.e.",
+    shaped = [m for m in result.modes if m.shape is not None]
+    for mode in shaped:
+        sh = mode.shape
+        s.table([f"marker (mode at {mode.frequency_hz:.3g} Hz)", "colour", "amplitude (px)", "± s.e.",
                  "relative to the lead", "phase against the lead (deg)", "± s.e."],
                 [[m, c, *format_with_uncertainty(a, sa), format_value(r, 3), *format_with_uncertainty(p, sp)]
                  for m, c, a, sa, r, p, sp in zip(sh.markers, sh.colours, sh.amplitude_px, sh.amplitude_stderr_px,
                                                   sh.relative(), sh.phase_deg, sh.phase_stderr_deg)])
-        frame = _blade_frame(result, shaped)
+    if shaped:
+        frame = _blade_frame(result, shaped[0])
         if frame is not None:
             s.figure(frame, "A frame of the step with every marker (squares), the chord line through the lead and "
                      "trail markers, and the mode's shape: each marker's ring-down across the chord line, drawn "
@@ -421,10 +422,14 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
         hm = result.heave_model
         curve = None
         if hm is not None:
-            k, kse = format_with_uncertainty(hm.gain_px_per_rad, hm.gain_stderr_px_per_rad)
-            s.text(f"Fitted as a mode thrown by the pitch's acceleration, heave/pitch = κ·ω²/(ωm² − ω² + 2jζωm·ω): "
-                   f"κ = {k} ± {kse} px/rad, fm = {hm.mode.frequency_hz:.4g} ± {hm.mode.frequency_stderr_hz:.2g} Hz, "
-                   f"ζ = {hm.mode.damping_ratio:.3g} ± {hm.mode.damping_ratio_stderr:.2g} over {hm.n_dwells} dwells "
+            terms = "; ".join(
+                f"κ = {' ± '.join(format_with_uncertainty(k, kse))} px/rad, "
+                + (f"fm = {m.frequency_hz:.4g} Hz and ζ = {m.damping_ratio:.3g} held at the step's" if m.source == "held"
+                   else f"fm = {m.frequency_hz:.4g} ± {m.frequency_stderr_hz:.2g} Hz, ζ = {m.damping_ratio:.3g} ± "
+                        f"{m.damping_ratio_stderr:.2g}")
+                for k, kse, m in zip(hm.gains_px_per_rad, hm.gain_stderrs_px_per_rad, hm.modes))
+            s.text(f"Fitted as {'a mode' if len(hm.modes) == 1 else f'{len(hm.modes)} modes'} thrown by the pitch's "
+                   f"acceleration, heave/pitch = Σ κ·ω²/(ωm² − ω² + 2jζωm·ω): {terms}; over {hm.n_dwells} dwells "
                    f"(reduced χ² {hm.chi2_reduced:.3g}).")
             f = np.geomspace(min(r.frequency_hz for r in result.heave_response) / 1.5,
                              max(r.frequency_hz for r in result.heave_response) * 1.5, 400)

@@ -168,8 +168,10 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     lead, trail = scene.sticker_centres_px(pitch)
     angle = marker_angle_rad(lead, trail)
     led = led_exposure_fraction(time_s, signal.t0_s, preset.exposure_s)
+    modes = blade_modes_of(preset)
+    shapes = [_shape_along_chord(scene, bend) if bend else None for *_, bend in modes] or [None]
     renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed,
-                             mode_shape=_shape_along_chord(preset, scene) if preset.blade_mode_bend else None)
+                             mode_shape=shapes if len(shapes) > 1 else shapes[0])
     extra_xy = scene.to_image(scene.extra_centres_uv(), pitch) if scene.extra_stickers else None
     rolling: dict = {}
     if preset.readout_s > 0:
@@ -191,7 +193,10 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     shake = _shake_px(preset, n, noise_seed)
     roll = preset.roll_rad * np.sin(2.0 * np.pi * preset.roll_hz * time_s)
     rock = preset.rock_rad * np.sin(2.0 * np.pi * preset.rock_hz * time_s)
-    heave = blade_heave_px(preset, signal, time_s)
+    per_mode = mode_heaves_px(preset, signal, time_s)
+    heave = per_mode.sum(axis=0) if len(per_mode) else np.zeros(time_s.size)
+    # What the renderer moves each frame by: the heave (one mode), or each mode's (two).
+    frame_heave = (lambda i: float(heave[i])) if len(per_mode) <= 1 else (lambda i: tuple(per_mode[:, i]))
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
     if preset.frames_format is not None:
         writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
@@ -218,11 +223,11 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
                                        phase)) if flicker else 1.0
                 if preset.monochrome:
                     clean = renderer.composite(float(pitch[i]), float(led[i]), gain, tuple(shake[i]), float(roll[i]),
-                                               float(rock[i]), float(heave[i]))
+                                               float(rock[i]), frame_heave(i))
                     writer.write_gray(_gray_frame(clean, preset, noise_seed, i), preset.bit_depth)
                 else:
                     writer.write(renderer.render(float(pitch[i]), float(led[i]), i, gain, tuple(shake[i]),
-                                                 float(roll[i]), float(rock[i]), float(heave[i])))
+                                                 float(roll[i]), float(rock[i]), frame_heave(i)))
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
@@ -245,20 +250,28 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **({"roll_rad": roll.tolist()} if preset.roll_rad != 0 else {}),
         **({"rock_rad": rock.tolist()} if preset.rock_rad != 0 else {}),
         **({"heave_px": heave.tolist()} if preset.blade_mode_hz > 0 else {}),
+        **({"mode_heave_px": per_mode.tolist()} if len(per_mode) > 1 else {}),
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
 
 
-def _shape_along_chord(preset: CampaignPreset, scene: Scene) -> Callable[[np.ndarray], np.ndarray]:
-    """The blade mode's share of the heave at chord coordinate u (blade frame, px).
+def blade_modes_of(preset: CampaignPreset) -> list[tuple[float, float, float, float]]:
+    """The blade's modes as ``(frequency_hz, damping_ratio, px_per_rad, bend)``: none, one or two."""
+    if preset.blade_mode_hz <= 0:
+        return []
+    first = (preset.blade_mode_hz, preset.blade_mode_damping, preset.blade_mode_px_per_rad, preset.blade_mode_bend)
+    return [first] + ([tuple(preset.blade_mode2)] if preset.blade_mode2 is not None else [])
+
+
+def _shape_along_chord(scene: Scene, bend: float) -> Callable[[np.ndarray], np.ndarray]:
+    """A blade mode's share of its heave at chord coordinate u (blade frame, px).
 
     ``1 − 4·bend·f·(1 − f)``, f the place's position from the trail sticker (0) to the lead (1)
     along the chord: the lead and trail stickers move with the heave, the blade between them
-    less (``blade_mode_bend``), beyond them more.
+    less (``bend`` > 0), beyond them more.
     """
     lead, trail = scene.sticker_centres_uv()
-    bend = preset.blade_mode_bend
 
     def share(u: np.ndarray) -> np.ndarray:
         f = (np.asarray(u, dtype=np.float64) - trail[0]) / (lead[0] - trail[0])
@@ -266,26 +279,37 @@ def _shape_along_chord(preset: CampaignPreset, scene: Scene) -> Callable[[np.nda
     return share
 
 
-def mode_shape(preset: CampaignPreset, scene: Scene) -> tuple[float, ...]:
-    """The blade mode's share of the heave at each sticker's centre: lead, trail, then the extra stickers."""
-    share = _shape_along_chord(preset, scene)
+def mode_shape(scene: Scene, bend: float) -> tuple[float, ...]:
+    """A blade mode's share of its heave at each sticker's centre: lead, trail, then the extra stickers."""
+    share = _shape_along_chord(scene, bend)
     centres = [*scene.sticker_centres_uv(), *scene.extra_centres_uv()]
     return tuple(float(share(np.array([c[0]]))[0]) for c in centres)
 
 
-def blade_heave_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
-    """The blade's heave (px, up positive) at each frame: its mode driven by the pitch's acceleration.
+def mode_heaves_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
+    """Each mode's heave (px, up positive) at each frame, shape (modes, frames): driven by the pitch's acceleration.
 
-    ``Q(s)/Θ(s) = −κ s² / (s² + 2ζω s + ω²)``, simulated with python-control on a grid 20× finer
-    than the frames (the mode's period is a handful of frames), from rest; zeros for a rigid blade.
+    ``Q(s)/Θ(s) = −κ s² / (s² + 2ζω s + ω²)`` per mode, simulated with python-control on a grid
+    20× finer than the frames (the mode's period is a handful of frames), from rest; shape (0,
+    frames) for a rigid blade.
     """
-    if preset.blade_mode_hz <= 0 or time_s.size == 0:
-        return np.zeros(time_s.size)
-    w, z, k = 2.0 * math.pi * preset.blade_mode_hz, preset.blade_mode_damping, preset.blade_mode_px_per_rad
+    modes = blade_modes_of(preset)
+    if not modes or time_s.size == 0:
+        return np.zeros((len(modes), time_s.size))
     fine = np.linspace(0.0, float(time_s[-1]), 20 * time_s.size + 1)
     pitch = preset.servo.response(signal, fine)
-    out = control.forced_response(control.tf([-k, 0.0, 0.0], [1.0, 2.0 * z * w, w * w]), fine, pitch - pitch[0])
-    return np.interp(time_s, fine, np.asarray(out.outputs, dtype=float))
+    out = []
+    for hz, z, k, _ in modes:
+        w = 2.0 * math.pi * hz
+        q = control.forced_response(control.tf([-k, 0.0, 0.0], [1.0, 2.0 * z * w, w * w]), fine, pitch - pitch[0])
+        out.append(np.interp(time_s, fine, np.asarray(q.outputs, dtype=float)))
+    return np.array(out)
+
+
+def blade_heave_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
+    """The blade's heave (px, up positive) at each frame: the sum of its modes' (:func:`mode_heaves_px`)."""
+    per_mode = mode_heaves_px(preset, signal, time_s)
+    return per_mode.sum(axis=0) if len(per_mode) else np.zeros(time_s.size)
 
 
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
@@ -496,23 +520,22 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                           "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
                                           "reference_stickers", "monochrome", "sine_amplitudes",
                                           "blade_mode_hz", "blade_mode_damping", "blade_mode_px_per_rad",
-                                          "blade_mode_bend", "bit_depth")
+                                          "blade_mode_bend", "blade_mode2", "bit_depth")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         "sticker_offset_rad": scene.sticker_offset_rad,
         **({"extra_stickers": [{"colour": c, "position": f} for c, f in scene.extra_stickers]}
            if scene.extra_stickers else {}),
-        **({"modes": [{"frequency_hz": p.blade_mode_hz, "damping_ratio": p.blade_mode_damping,
-                       "heave_px_per_rad": p.blade_mode_px_per_rad,
-                       **({"shape": _shape_truth(p, scene)} if scene.extra_stickers or p.blade_mode_bend else {})}]}
-           if p.blade_mode_hz > 0 else {}),
+        **({"modes": [{"frequency_hz": hz, "damping_ratio": z, "heave_px_per_rad": k,
+                       **({"shape": _shape_truth(scene, bend)} if scene.extra_stickers or bend else {})}
+                      for hz, z, k, bend in blade_modes_of(p)]} if p.blade_mode_hz > 0 else {}),
         "input_units": p.input_units,
         "tests": tests,
     }
 
 
-def _shape_truth(p: CampaignPreset, scene: Scene) -> dict:
-    shape = mode_shape(p, scene)
+def _shape_truth(scene: Scene, bend: float) -> dict:
+    shape = mode_shape(scene, bend)
     return {"lead": shape[0], "trail": shape[1], "extra": list(shape[2:])}
 
 

@@ -153,6 +153,10 @@ class CampaignPreset:
         it, a sticker halfway ``1 − bend``), seen by extra stickers
         (``extra_stickers``); truth's mode lists its ``shape`` at each sticker. 0 (the
         default): a rigid blade's mode.
+    blade_mode2 : (float, float, float, float) or None
+        A second mode beside the first (``blade_mode_hz > 0``): its frequency (Hz),
+        damping ratio, ``px_per_rad`` and ``bend``, driven and seen as the first;
+        the stickers move by the sum of both. None (the default): one mode.
     extra_stickers : tuple of (str, float)
         More stickers on the blade, ``(colour, position)`` with position from the
         trail sticker (0) to the lead (1) (the scene's
@@ -228,6 +232,7 @@ class CampaignPreset:
     blade_mode_damping: float = 0.03
     blade_mode_px_per_rad: float = 40.0
     blade_mode_bend: float = 0.0
+    blade_mode2: tuple[float, float, float, float] | None = None
     extra_stickers: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
@@ -278,6 +283,12 @@ class CampaignPreset:
                 and 0 < self.blade_mode_damping < 1 and math.isfinite(self.blade_mode_px_per_rad)
                 and math.isfinite(self.blade_mode_bend)):
             raise ServoscopeError("blade_mode_hz must be >= 0, blade_mode_damping in (0, 1) and blade_mode_bend finite")
+        if self.blade_mode2 is not None:
+            f2, z2, k2, b2 = (float(v) for v in self.blade_mode2)
+            if not (self.blade_mode_hz > 0 and f2 > 0 and 0 < z2 < 1 and math.isfinite(f2 + k2 + b2)):
+                raise ServoscopeError("blade_mode2 = (frequency_hz > 0, damping ratio in (0, 1), px_per_rad, bend) "
+                                      "beside a first mode (blade_mode_hz > 0)")
+            object.__setattr__(self, "blade_mode2", (f2, z2, k2, b2))
         if self.blade_mode_hz > 0 and (self.readout_s > 0 or self.motion_blur):
             raise ServoscopeError("a flapping blade (blade_mode_hz > 0) is rendered with a global shutter and no "
                                   "motion blur")

@@ -21,7 +21,7 @@ import math
 from dataclasses import replace
 
 import cv2
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.special
@@ -185,12 +185,15 @@ class FrameRenderer:
         frame's chord coordinate, px) is how far a point there moves across
         the chord per px of ``heave_px`` (a bending mode). The blade's outline
         and the LED bend with it, each sticker moves whole by its centre's
-        share. None: 1 everywhere (the whole blade heaves).
+        share. None: 1 everywhere (the whole blade heaves). A sequence: one
+        shape per mode (None for a rigid one), each frame's ``heave_px`` then one
+        value per mode.
     """
 
     def __init__(self, scene: Scene, camera: CameraModel | None = None, *,
                  noise_sigma_dn: float = 1.5, noise_seed: int = 0,
-                 mode_shape: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 mode_shape: Callable[[np.ndarray], np.ndarray] | None
+                 | Sequence[Callable[[np.ndarray], np.ndarray] | None] = None) -> None:
         if camera is not None and tuple(camera.image_size) != (scene.width, scene.height):
             raise ServoscopeError(
                 f"camera image size {camera.image_size} differs from the scene's {(scene.width, scene.height)}")
@@ -225,33 +228,43 @@ class FrameRenderer:
         self._parts_uv.append(scene.led_centre_uv() + rl * unit)
         self._splits = np.cumsum([len(p) for p in self._parts_uv])[:-1]
         self._all_uv = np.concatenate(self._parts_uv, axis=0)
-        # How far each vertex moves per px of the mode's heave: a sticker (a stiff patch) by its
-        # centre's share, everything else by its own place's.
-        self._heave_share: np.ndarray | None = None
-        if mode_shape is not None:
-            centres = [lead_uv, trail_uv, *scene.extra_centres_uv()]
-            share = [np.asarray(mode_shape(p[:, 0]), dtype=np.float64) for p in self._parts_uv]
-            for k, c in enumerate(centres):
-                share[1 + k] = np.full(len(self._parts_uv[1 + k]), float(mode_shape(np.array([c[0]]))[0]))
-            self._heave_share = np.concatenate(share)
+        # How far each vertex moves per px of each mode's heave: a sticker (a stiff patch) by its
+        # centre's share, everything else by its own place's; None: a mode that moves all alike.
+        shapes = list(mode_shape) if isinstance(mode_shape, (list, tuple)) else [mode_shape]
+        self._heave_share: list[np.ndarray | None] = [self._share_of(f, [lead_uv, trail_uv,
+                                                                         *scene.extra_centres_uv()])
+                                                      for f in shapes]
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
+    def _share_of(self, shape, centres) -> np.ndarray | None:
+        if shape is None:
+            return None
+        share = [np.asarray(shape(p[:, 0]), dtype=np.float64) for p in self._parts_uv]
+        for k, c in enumerate(centres):
+            share[1 + k] = np.full(len(self._parts_uv[1 + k]), float(shape(np.array([c[0]]))[0]))
+        return np.concatenate(share)
+
     def outlines_px(self, pitch_rad: float, airframe: np.ndarray | None = None,
-                    heave_px: float = 0.0) -> list[np.ndarray]:
+                    heave_px: float | Sequence[float] = 0.0) -> list[np.ndarray]:
         """Recorded (distorted) outlines of blade, lead sticker, trail sticker, extra stickers, (LED housing,) LED.
 
         ``airframe`` (2×3, :func:`airframe_motion`) turns them with the airframe, in the
         ideal image (before the lens), as the airframe turns in the world. ``heave_px``
-        moves the whole blade across its chord (the blade flapping, up positive).
+        moves the whole blade across its chord (the blade flapping, up positive): one value
+        per mode shape the renderer was given.
         """
-        if heave_px == 0.0:
+        q = (float(heave_px),) if np.isscalar(heave_px) else tuple(float(v) for v in heave_px)
+        if len(q) != len(self._heave_share):
+            raise ServoscopeError(f"heave_px: {len(q)} values for {len(self._heave_share)} modes")
+        if not any(q):
             uv = self._all_uv
-        elif self._heave_share is None:
-            uv = self._all_uv + np.array([0.0, heave_px])
+        elif len(q) == 1 and self._heave_share[0] is None:
+            uv = self._all_uv + np.array([0.0, q[0]])
         else:
             uv = self._all_uv.copy()
-            uv[:, 1] += heave_px * self._heave_share
+            for qj, share in zip(q, self._heave_share):
+                uv[:, 1] += qj if share is None else qj * share
         xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)

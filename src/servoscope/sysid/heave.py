@@ -87,14 +87,14 @@ class HeaveRow:
 def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s: float, amplitude: float,
                 window_s: tuple[float, float], label: str = "", marker: str = "", colour: str = "", *,
                 systematic_px: float = HEAVE_SYSTEMATIC_PX,
-                mode: tuple[float, float] | None = None) -> HeaveRow | None:
+                mode: tuple[float, float] | list[tuple[float, float]] | None = None) -> HeaveRow | None:
     """The heave's sine at ``frequency_hz`` in a dwell's steady window, by least squares with HAC errors.
 
-    ``mode`` (frequency Hz, damping ratio): the blade's mode, whose free ring-down from the
-    dwell's start is still in the window; fitted beside the sine (its two decaying columns),
-    not left in the residual, where it swelled the quick preset's errors 10-fold. Left out
-    when the mode lies within a line width (1/window) of the dwell's frequency: there the two
-    cannot be told apart in the window. The errors include ``systematic_px`` and
+    ``mode`` (frequency Hz, damping ratio), or a list of them: the blade's modes, whose free
+    ring-downs from the dwell's start are still in the window; fitted beside the sine (two
+    decaying columns each), not left in the residual, where they swelled the quick preset's
+    errors 10-fold. A mode within a line width (1/window) of the dwell's frequency is left
+    out: there the two cannot be told apart in the window. The errors include ``systematic_px`` and
     :data:`HEAVE_SYSTEMATIC_REL` of the amplitude (in phase as that much displacement across
     the amplitude); None with fewer than 10 samples in the window.
     """
@@ -105,8 +105,11 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
     w = 2.0 * math.pi * frequency_hz * (t[inside] - t0_s)
     columns = [np.sin(w), np.cos(w), np.ones_like(w)]
     span = float(window_s[1] - window_s[0])
-    if mode is not None and span > 0 and abs(mode[0] - frequency_hz) > 1.0 / span:
-        wn, z = 2.0 * math.pi * mode[0], mode[1]
+    modes = [] if mode is None else [mode] if np.isscalar(mode[0]) else list(mode)
+    for fm, z in modes:
+        if not (span > 0 and abs(fm - frequency_hz) > 1.0 / span):
+            continue
+        wn = 2.0 * math.pi * fm
         tau = t[inside] - window_s[0]
         env = np.exp(-z * wn * tau)
         wd = wn * math.sqrt(max(1.0 - z * z, 0.0))
@@ -131,42 +134,63 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
 
 @dataclass(frozen=True)
 class HeaveModel:
-    """The flapping frequency response fitted: heave over pitch as a mode driven by the pitch's acceleration.
+    """The flapping frequency response fitted: heave over pitch as modes driven by the pitch's acceleration.
 
-    ``Q/Θ(jω) = κ·ω² / (ωm² − ω² + 2j·ζ·ωm·ω)`` (``−κ s²`` over the mode's denominator, as a
-    blade whose inertia the pitch's acceleration throws across its chord), fitted to each
+    ``Q/Θ(jω) = Σⱼ κⱼ·ω² / (ωⱼ² − ω² + 2j·ζⱼ·ωⱼ·ω)`` (``−κ s²`` over each mode's denominator, as
+    a blade whose inertia the pitch's acceleration throws across its chord), fitted to each
     dwell's heave over its pitch (complex ratios, px per rad).
 
     Attributes
     ----------
-    gain_px_per_rad, gain_stderr_px_per_rad : float
-        κ: the heave per rad of pitch well above the mode.
-    mode : ModeFit
-        The mode's frequency and damping with their errors (source ``"heave_response"``).
+    gains_px_per_rad, gain_stderrs_px_per_rad : tuple of float
+        Each κⱼ: a mode's heave per rad of pitch well above it.
+    modes : tuple of ModeFit
+        Each mode's frequency and damping with their errors (source ``"heave_response"``), or,
+        for a mode the dwells cannot tell, the step's, held (source ``"held"``, errors NaN).
     chi2_reduced : float
         The fit's χ² over its degrees of freedom (errors widened by its square root when above 1).
     n_dwells : int
     """
 
-    gain_px_per_rad: float
-    gain_stderr_px_per_rad: float
-    mode: Any
+    gains_px_per_rad: tuple[float, ...]
+    gain_stderrs_px_per_rad: tuple[float, ...]
+    modes: tuple[Any, ...]
     chi2_reduced: float
     n_dwells: int
+
+    @property
+    def gain_px_per_rad(self) -> float:
+        """The first mode's κ."""
+        return self.gains_px_per_rad[0]
+
+    @property
+    def gain_stderr_px_per_rad(self) -> float:
+        return self.gain_stderrs_px_per_rad[0]
+
+    @property
+    def mode(self):
+        """The first (strongest) mode."""
+        return self.modes[0]
 
     def ratio(self, frequency_hz: np.ndarray) -> np.ndarray:
         """The fitted heave over pitch (complex, px per rad) at ``frequency_hz``."""
         w = 2.0 * math.pi * np.asarray(frequency_hz, dtype=float)
-        wm, z = 2.0 * math.pi * self.mode.frequency_hz, self.mode.damping_ratio
-        return self.gain_px_per_rad * w**2 / (wm**2 - w**2 + 2j * z * wm * w)
+        out = np.zeros(w.shape, dtype=complex)
+        for kappa, m in zip(self.gains_px_per_rad, self.modes):
+            wm, z = 2.0 * math.pi * m.frequency_hz, m.damping_ratio
+            out = out + kappa * w**2 / (wm**2 - w**2 + 2j * z * wm * w)
+        return out
 
     def summary(self) -> dict[str, Any]:
-        """Plain types, result.json's ``heave_model``."""
-        return jsonable({"model": "heave/pitch = kappa*w^2/(wm^2 - w^2 + 2j*zeta*wm*w)",
-                         "gain_px_per_rad": self.gain_px_per_rad, "gain_stderr_px_per_rad": self.gain_stderr_px_per_rad,
-                         "frequency_hz": self.mode.frequency_hz, "damping_ratio": self.mode.damping_ratio,
-                         "stderr": {"frequency_hz": self.mode.frequency_stderr_hz,
-                                    "damping_ratio": self.mode.damping_ratio_stderr},
+        """Plain types, result.json's ``heave_model``: the first mode's terms, and every mode's in ``modes``."""
+        def terms(kappa, se, m):
+            return {"gain_px_per_rad": kappa, "gain_stderr_px_per_rad": se, "frequency_hz": m.frequency_hz,
+                    "damping_ratio": m.damping_ratio,
+                    "stderr": {"frequency_hz": m.frequency_stderr_hz, "damping_ratio": m.damping_ratio_stderr},
+                    **({"held": True} if m.source == "held" else {})}
+        all_terms = [terms(*x) for x in zip(self.gains_px_per_rad, self.gain_stderrs_px_per_rad, self.modes)]
+        return jsonable({"model": "heave/pitch = sum of kappa*w^2/(wm^2 - w^2 + 2j*zeta*wm*w)", **all_terms[0],
+                         **({"modes": all_terms} if len(all_terms) > 1 else {}),
                          "chi2_reduced": self.chi2_reduced, "n_dwells": self.n_dwells})
 
     @classmethod
@@ -174,13 +198,18 @@ class HeaveModel:
         """The model back from :meth:`summary`'s dict."""
         from .modes import ModeFit
 
-        mode = ModeFit(d["frequency_hz"], d["stderr"]["frequency_hz"], d["damping_ratio"], d["stderr"]["damping_ratio"],
-                       d["gain_px_per_rad"], "heave_response")
-        return cls(d["gain_px_per_rad"], d["gain_stderr_px_per_rad"], mode, d["chi2_reduced"], d["n_dwells"])
+        terms = d.get("modes") or [d]
+        def nan_if_none(v):
+            return math.nan if v is None else v
+        modes = tuple(ModeFit(t["frequency_hz"], nan_if_none(t["stderr"]["frequency_hz"]), t["damping_ratio"],
+                              nan_if_none(t["stderr"]["damping_ratio"]), abs(t["gain_px_per_rad"]),
+                              "held" if t.get("held") else "heave_response") for t in terms)
+        return cls(tuple(t["gain_px_per_rad"] for t in terms), tuple(t["gain_stderr_px_per_rad"] for t in terms), modes,
+                   d["chi2_reduced"], d["n_dwells"])
 
 
 def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, float, float]],
-                    start_hz: float | None = None) -> HeaveModel | None:
+                    start_hz: float | list[float] | None = None) -> HeaveModel | None:
     """Fit :class:`HeaveModel` to the dwells' heave over their pitch; None when it cannot be told.
 
     Parameters
@@ -189,14 +218,17 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
         Each dwell's heave (gain per input unit, phase against the input).
     pitch : dict of label → (gain, gain_stderr, phase_rad, phase_stderr_rad)
         Each dwell's pitch against the same input (rad per input unit).
-    start_hz : float, optional
-        A mode's frequency to start from (the step's); else a grid over the dwells' range.
+    start_hz : float, or list of frequencies or (frequency, damping ratio) pairs, optional
+        The modes found elsewhere (the step's): one term each, started there; a mode beyond what
+        the dwells can tell (3 dwells per mode) keeps its frequency and damping, only its κ is
+        fitted. None: one mode, started from a grid over the dwells' range.
 
     Each ratio's error is isotropic in the complex plane: its modulus times the larger of its
     relative gain error and its phase error. The covariance is the Jacobian's, widened by the
     reduced χ² when above 1, then the modes' systematic part (:data:`~servoscope.sysid.modes.MODE_SYSTEMATIC`)
-    is added. None with fewer than 3 dwells, a fit that fails, a damping ratio outside
-    (0, ``MAX_MODE_DAMPING``], or a mode outside the dwells' frequencies (where nothing shows it).
+    is added. None with fewer than 3 dwells, a fit that fails, a damping ratio
+    outside (0, ``MAX_MODE_DAMPING``], or a mode outside the dwells' frequencies (where nothing
+    shows it).
     """
     from scipy.optimize import least_squares
 
@@ -211,41 +243,73 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
                         math.hypot(math.radians(r.phase_stderr_deg), p[3])) for r, p in data])
     sd = np.abs(z) * np.minimum(rel, 1e6) + 1e-12
     w = 2.0 * math.pi * f
+    known = [tuple(float(u) for u in np.atleast_1d(v)) for v in
+             ([start_hz] if np.isscalar(start_hz) else (start_hz or []))]
+    n = max(len(known), 1)
+    # Modes beyond what the dwells can tell (3 parameters each, 3 dwells per mode) keep the
+    # step's frequency and damping; only their κ is fitted, so that they do not bend the first.
+    free = n if len(data) >= 3 * n else 1
+    held = [(k[0], k[1] if len(k) > 1 else 0.05) for k in known[free:]]
+
+    def unpack(x):
+        terms = [tuple(x[3 * j:3 * j + 3]) for j in range(free)]
+        return terms + [(x[3 * free + j], fm, zeta) for j, (fm, zeta) in enumerate(held)]
 
     def model(x):
-        kappa, fm, zeta = x
-        wm = 2.0 * math.pi * fm
-        return kappa * w**2 / (wm**2 - w**2 + 2j * zeta * wm * w)
+        out = np.zeros(w.shape, dtype=complex)
+        for kappa, fm, zeta in unpack(x):
+            wm = 2.0 * math.pi * fm
+            out = out + kappa * w**2 / (wm**2 - w**2 + 2j * zeta * wm * w)
+        return out
 
     def resid(x):
         d = (model(x) - z) / sd
         return np.concatenate([d.real, d.imag])
 
-    starts = [start_hz] if start_hz else list(np.geomspace(f.min(), f.max(), 12))
+    start_sets = [[k[0] for k in known[:free]]] if known else [[fm0] for fm0 in np.geomspace(f.min(), f.max(), 12)]
     best = None
-    for fm0 in starts:
-        wm0 = 2.0 * math.pi * fm0
-        shape = w**2 / (wm0**2 - w**2 + 2j * 0.05 * wm0 * w)
-        kappa0 = float(np.real(np.vdot(shape / sd, z / sd)) / np.real(np.vdot(shape / sd, shape / sd)))
+    for fms in start_sets:
+        x0, lo, hi = [], [], []
+        for fm0 in fms:
+            wm0 = 2.0 * math.pi * fm0
+            shape = w**2 / (wm0**2 - w**2 + 2j * 0.05 * wm0 * w)
+            kappa0 = float(np.real(np.vdot(shape / sd, z / sd)) / np.real(np.vdot(shape / sd, shape / sd)))
+            x0 += [kappa0, fm0, 0.05]
+            lo += [-np.inf, 0.2 * f.min(), 1e-4]
+            hi += [np.inf, 5.0 * f.max(), 0.9]
+        x0 += [0.0] * len(held)
+        lo += [-np.inf] * len(held)
+        hi += [np.inf] * len(held)
         try:
-            sol = least_squares(resid, [kappa0, fm0, 0.05], bounds=([-np.inf, 0.2 * f.min(), 1e-4],
-                                                                    [np.inf, 5.0 * f.max(), 0.9]))
+            sol = least_squares(resid, x0, bounds=(lo, hi))
         except (ValueError, np.linalg.LinAlgError):
             continue
         if sol.success and (best is None or sol.cost < best.cost):
             best = sol
     if best is None:
         return None
-    kappa, fm, zeta = (float(v) for v in best.x)
-    dof = max(2 * len(data) - 3, 1)
+    x = [float(v) for v in best.x]
+    dof = max(2 * len(data) - len(x), 1)
     chi2 = 2.0 * float(best.cost) / dof
     try:
         cov = np.linalg.inv(best.jac.T @ best.jac) * max(chi2, 1.0)
     except np.linalg.LinAlgError:
         return None
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    if not (0.0 < zeta <= MAX_MODE_DAMPING and f.min() <= fm <= f.max() and np.all(np.isfinite(se))):
+    terms = []
+    if not np.all(np.isfinite(se)):
         return None
-    mode = ModeFit(fm, math.hypot(float(se[1]), MODE_SYSTEMATIC["frequency"] * fm), zeta,
-                   math.hypot(float(se[2]), MODE_SYSTEMATIC["damping"] * zeta), abs(kappa), "heave_response")
-    return HeaveModel(kappa, float(se[0]), mode, chi2, len(data))
+    for j, (kappa, fm, zeta) in enumerate(unpack(x)):
+        if j < free:
+            if not (0.0 < zeta <= MAX_MODE_DAMPING and f.min() <= fm <= f.max()):
+                return None
+            mode = ModeFit(fm, math.hypot(float(se[3 * j + 1]), MODE_SYSTEMATIC["frequency"] * fm), zeta,
+                           math.hypot(float(se[3 * j + 2]), MODE_SYSTEMATIC["damping"] * zeta), abs(kappa),
+                           "heave_response")
+            terms.append((kappa, float(se[3 * j]), mode))
+        else:
+            # Held at the step's: a mode of the model, not a finding of the heave's (source "held").
+            terms.append((kappa, float(se[3 * free + j - free]), ModeFit(fm, math.nan, zeta, math.nan, abs(kappa),
+                                                                         "held")))
+    return HeaveModel(tuple(t[0] for t in terms), tuple(t[1] for t in terms), tuple(t[2] for t in terms), chi2,
+                      len(data))

@@ -24,7 +24,8 @@ from servoscope.results import jsonable
 
 from .hac import hac_covariance
 
-__all__ = ["ModeFit", "ModeShape", "fit_damped_mode", "fit_mode_shape", "pool_modes"]
+__all__ = ["ModeFit", "ModeShape", "fit_damped_mode", "fit_damped_modes", "fit_mode_shape", "fit_mode_shapes",
+           "pool_modes"]
 
 #: A ring-down is taken as seen when its amplitude is this many times the signal's noise.
 MIN_SNR = 10.0
@@ -131,47 +132,162 @@ class ModeShape:
 def fit_mode_shape(time_s: np.ndarray, signals: np.ndarray, start_s: float, mode: ModeFit,
                    markers: tuple[str, ...], colours: tuple[str, ...], *,
                    systematic_px: float = 0.0) -> ModeShape | None:
-    """Each marker's share of a fitted mode: its signal's ring-down at the mode's frequency and damping.
+    """One mode's shape across the markers: :func:`fit_mode_shapes` with that mode alone."""
+    shapes = fit_mode_shapes(time_s, signals, start_s, [mode], markers, colours, systematic_px=systematic_px)
+    return shapes[0] if shapes else None
 
-    With the mode's frequency and damping held, each marker's signal (its distance across the
+
+def fit_mode_shapes(time_s: np.ndarray, signals: np.ndarray, start_s: float, modes: list[ModeFit],
+                    markers: tuple[str, ...], colours: tuple[str, ...], *,
+                    systematic_px: float = 0.0) -> list[ModeShape]:
+    """Each marker's share of each fitted mode: its signal's ring-downs at the modes' frequencies and dampings.
+
+    With the modes' frequencies and dampings held, each marker's signal (its distance across the
     chord line from where it rests, px) from ``start_s`` on is a linear least-squares fit of
-    ``e^(−σt)·(a·cos ω_d t + b·sin ω_d t) + c``; its amplitude and phase by the delta method from
-    the Newey–West covariance, plus ``systematic_px`` in amplitude (and that much displacement
-    in phase). Phases are against the first marker's. None with fewer than 20 samples.
+    ``Σⱼ e^(−σⱼt)·(aⱼ·cos ωⱼt + bⱼ·sin ωⱼt) + c`` (all modes together: one's ring-down is not read
+    as another's); each amplitude and phase by the delta method from the Newey–West covariance,
+    plus ``systematic_px`` in amplitude (and that much displacement in phase). Phases are
+    against the first marker's. One shape per mode; empty with fewer than 20 samples.
     """
     t = np.asarray(time_s, dtype=float)
     y = np.asarray(signals, dtype=float)
     keep = np.isfinite(t) & (t >= start_s) & np.all(np.isfinite(y), axis=1)
-    if np.count_nonzero(keep) < 20:
-        return None
+    if np.count_nonzero(keep) < 20 or not modes:
+        return []
     tt = t[keep] - start_s
-    wn = 2.0 * math.pi * mode.frequency_hz
-    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
-    env = np.exp(-sigma * tt)
-    design = np.column_stack([env * np.cos(wd * tt), env * np.sin(wd * tt), np.ones_like(tt)])
-    amps, amp_se, phases, phase_se = [], [], [], []
+    columns = []
+    for mode in modes:
+        wn = 2.0 * math.pi * mode.frequency_hz
+        sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
+        env = np.exp(-sigma * tt)
+        columns += [env * np.cos(wd * tt), env * np.sin(wd * tt)]
+    design = np.column_stack(columns + [np.ones_like(tt)])
+    amps = np.zeros((len(modes), y.shape[1]))
+    amp_se, phases, phase_se = np.zeros_like(amps), np.zeros_like(amps), np.zeros_like(amps)
     for k in range(y.shape[1]):
         v = y[keep, k]
         coef, *_ = np.linalg.lstsq(design, v, rcond=None)
-        cov = hac_covariance(design, v - design @ coef)[:2, :2]
-        a, b = float(coef[0]), float(coef[1])
-        amp = math.hypot(a, b)
-        amp = max(amp, 1e-12)
-        # a·cos + b·sin = amp·cos(ω_d t + φ) with φ = atan2(−b, a).
-        ga = np.array([a, b]) / amp
-        gp = np.array([b, -a]) / amp**2
-        amps.append(amp)
-        amp_se.append(math.hypot(math.sqrt(max(float(ga @ cov @ ga), 0.0)), systematic_px))
-        phases.append(math.atan2(-b, a))
-        phase_se.append(math.hypot(math.sqrt(max(float(gp @ cov @ gp), 0.0)), systematic_px / amp))
-    rel = [math.degrees(math.remainder(p - phases[0], 2.0 * math.pi)) for p in phases]
-    # The first marker's phase is the reference: the others' errors carry its error too.
-    rel_se = [0.0] + [math.degrees(math.hypot(s, phase_se[0])) for s in phase_se[1:]]
-    return ModeShape(tuple(markers), tuple(colours), tuple(amps), tuple(amp_se), tuple(rel), tuple(rel_se))
+        cov_all = hac_covariance(design, v - design @ coef)
+        for j in range(len(modes)):
+            a, b = float(coef[2 * j]), float(coef[2 * j + 1])
+            cov = cov_all[2 * j:2 * j + 2, 2 * j:2 * j + 2]
+            amp = max(math.hypot(a, b), 1e-12)
+            # a·cos + b·sin = amp·cos(ω_d t + φ) with φ = atan2(−b, a).
+            ga = np.array([a, b]) / amp
+            gp = np.array([b, -a]) / amp**2
+            amps[j, k] = amp
+            amp_se[j, k] = math.hypot(math.sqrt(max(float(ga @ cov @ ga), 0.0)), systematic_px)
+            phases[j, k] = math.atan2(-b, a)
+            phase_se[j, k] = math.hypot(math.sqrt(max(float(gp @ cov @ gp), 0.0)), systematic_px / amp)
+    shapes = []
+    for j in range(len(modes)):
+        rel = [math.degrees(math.remainder(p - phases[j, 0], 2.0 * math.pi)) for p in phases[j]]
+        # The first marker's phase is the reference: the others' errors carry its error too.
+        rel_se = [0.0] + [math.degrees(math.hypot(e, phase_se[j, 0])) for e in phase_se[j, 1:]]
+        shapes.append(ModeShape(tuple(markers), tuple(colours), tuple(float(v) for v in amps[j]),
+                                tuple(float(v) for v in amp_se[j]), tuple(rel), tuple(rel_se)))
+    return shapes
 
 
 def _ringdown(t, a, sigma, wd, phi, c):
     return a * np.exp(-sigma * t) * np.cos(wd * t + phi) + c
+
+
+def _window(time_s: np.ndarray, y: np.ndarray, start_s: float):
+    t, v = np.asarray(time_s, dtype=float), np.asarray(y, dtype=float)
+    keep = np.isfinite(t) & np.isfinite(v) & (t >= start_s)
+    if np.count_nonzero(keep) < 20:
+        return None
+    return t[keep] - start_s, v[keep]
+
+
+def _spectral_peak(t: np.ndarray, x: np.ndarray, dt: float, away_hz: list[tuple[float, float]]) -> float:
+    """The window's spectral peak (Hanning, zero-padded 16x), at least two cycles in the window and away from
+    each ``(frequency, half width)`` given (a forced line, a mode already found)."""
+    spectrum = np.abs(np.fft.rfft(x * np.hanning(x.size), 16 * x.size))
+    freqs = np.fft.rfftfreq(16 * x.size, dt)
+    spectrum[freqs < 2.0 / (t[-1] + dt)] = 0.0  # at least two cycles in the window
+    for f, half in away_hz:
+        spectrum[np.abs(freqs - f) < half] = 0.0
+    return float(freqs[int(np.argmax(spectrum))])
+
+
+def _fit_ringdowns(t: np.ndarray, v: np.ndarray, p0_modes: list[list[float]], c0: float, forced_hz: float | None,
+                   forced0: tuple[float, float], noise: float | None, source: str) -> list[ModeFit] | None:
+    """Fit a sum of ring-downs (with a forced sine) from the starts given; each mode's ModeFit, or None.
+
+    None when the fit fails or wanders; a mode that is too small (:data:`MIN_SNR`), not damped
+    or damped beyond :data:`MAX_MODE_DAMPING` comes back as None in its place.
+    """
+    n = len(p0_modes)
+    wf = 2.0 * math.pi * forced_hz if forced_hz is not None else 0.0
+
+    if n == 1:
+        # One mode: the parameter layout the fit has always had (a, σ, ω_d, φ, c[, b_s, b_c]).
+        model = _ringdown if forced_hz is None else (
+            lambda tt, a, sigma, wd, phi, c, bs, bc: _ringdown(tt, a, sigma, wd, phi, c)
+            + bs * np.sin(wf * tt) + bc * np.cos(wf * tt))
+    else:
+        def model(tt, *p):
+            # The first mode and the level as for one mode, the other modes after them, the forced line last.
+            out = _ringdown(tt, *p[:5])
+            for j in range(1, n):
+                a, sigma, wd, phi = _mode_params(p, j)
+                out = out + a * np.exp(-sigma * tt) * np.cos(wd * tt + phi)
+            if forced_hz is not None:
+                out = out + p[-2] * np.sin(wf * tt) + p[-1] * np.cos(wf * tt)
+            return out
+    p0 = list(p0_modes[0]) + [c0] + [v for extra in p0_modes[1:] for v in extra]
+    if forced_hz is not None:
+        p0 += list(forced0)
+    try:
+        # A fit that wanders (a growing exponential overflows) or whose covariance cannot be estimated
+        # is refused below (σ > 0, finite residual and covariance): no warning on the way.
+        with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore"):
+            warnings.simplefilter("ignore", OptimizeWarning)
+            popt, pcov = curve_fit(model, t, v, p0=p0, maxfev=20000 * n)
+            residual = v - model(t, *popt)
+    except (RuntimeError, ValueError):
+        return None
+    if not np.all(np.isfinite(residual)) or not np.all(np.isfinite(pcov)):
+        return None
+    scatter = float(np.std(residual))
+    # Residuals that follow each other (tracking errors, what is left of the servo's forced
+    # motion) carry less information than white ones: the covariance grows by the AR(1)
+    # factor (1 + ρ)/(1 − ρ) of their lag-1 autocorrelation ρ (≥ 0).
+    r = residual - residual.mean()
+    rho = float(r[1:] @ r[:-1]) / float(r @ r) if float(r @ r) > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.95)
+    pcov = pcov * (1.0 + rho) / (1.0 - rho)
+    out: list[ModeFit | None] = []
+    for j in range(n):
+        idx = _mode_index(j)
+        a, sigma, wd = popt[idx[0]], popt[idx[1]], popt[idx[2]]
+        if abs(a) < MIN_SNR * max(scatter, noise or 0.0) or not (wd > 0 and sigma > 0):
+            out.append(None)
+            continue
+        wn = math.hypot(wd, sigma)
+        cov = pcov[np.ix_([idx[1], idx[2]], [idx[1], idx[2]])]  # (σ, wd)
+        # Delta method: f = hypot(wd, σ)/2π, ζ = σ / hypot(wd, σ).
+        g_f = np.array([sigma, wd]) / (wn * 2.0 * math.pi)
+        g_z = np.array([wd**2 / wn**3, -sigma * wd / wn**3])
+        f, z = wn / (2.0 * math.pi), sigma / wn
+        if z > MAX_MODE_DAMPING:
+            out.append(None)
+            continue
+        se_f = math.hypot(math.sqrt(max(float(g_f @ cov @ g_f), 0.0)), MODE_SYSTEMATIC["frequency"] * f)
+        se_z = math.hypot(math.sqrt(max(float(g_z @ cov @ g_z), 0.0)), MODE_SYSTEMATIC["damping"] * z)
+        out.append(ModeFit(f, se_f, z, se_z, float(abs(a)), source))
+    return out  # type: ignore[return-value]
+
+
+def _mode_index(j: int) -> tuple[int, int, int, int]:
+    """Where mode j's (a, σ, ω_d, φ) sit in the parameter vector: the first's before the level c, the others after."""
+    return (0, 1, 2, 3) if j == 0 else tuple(5 + 4 * (j - 1) + k for k in range(4))  # type: ignore[return-value]
+
+
+def _mode_params(p, j: int):
+    return tuple(p[i] for i in _mode_index(j))
 
 
 def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise: float | None = None,
@@ -197,71 +313,93 @@ def fit_damped_mode(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise:
     -------
     ModeFit or None
     """
-    t, v = np.asarray(time_s, dtype=float), np.asarray(y, dtype=float)
-    keep = np.isfinite(t) & np.isfinite(v) & (t >= start_s)
-    if np.count_nonzero(keep) < 20:
-        return None
-    t, v = t[keep] - start_s, v[keep]
+    modes = fit_damped_modes(time_s, y, start_s, noise=noise, source=source, forced_hz=forced_hz, max_modes=1)
+    return modes[0] if modes else None
+
+
+def fit_damped_modes(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise: float | None = None,
+                     source: str = "step", forced_hz: float | None = None, max_modes: int = 2) -> list[ModeFit]:
+    """Fit up to ``max_modes`` ring-downs to ``y`` from ``start_s`` on, strongest first; empty when none shows.
+
+    The strongest mode is fitted alone (started from the window's spectral peak); the next is
+    looked for in what it leaves (the residual's spectral peak, away from the first mode's
+    resonance and any forced line), then both are fitted together by least squares. A second
+    mode is kept when the joint fit keeps it above :data:`MIN_SNR` times the noise, damped by
+    no more than :data:`MAX_MODE_DAMPING` and apart from the first by more than both their
+    half-power widths and 3 %: else the first alone stands, as fitted alone. Arguments as
+    :func:`fit_damped_mode`.
+    """
+    win = _window(time_s, y, start_s)
+    if win is None:
+        return []
+    t, v = win
     dt = float(np.median(np.diff(t)))
-    # The spectral peak of the window (mean removed, zero-padded 16x) starts the frequency.
     x = v - v.mean()
-    forced = None
+    away: list[tuple[float, float]] = []
+    forced0 = (0.0, 0.0)
     if forced_hz is not None:
         wf = 2.0 * math.pi * forced_hz
         forced = np.column_stack([np.sin(wf * t), np.cos(wf * t)])
         b = np.linalg.lstsq(np.column_stack([forced, np.ones_like(t)]), v, rcond=None)[0]
         x = v - forced @ b[:2] - b[2]
-    spectrum = np.abs(np.fft.rfft(x * np.hanning(x.size), 16 * x.size))
-    freqs = np.fft.rfftfreq(16 * x.size, dt)
-    spectrum[freqs < 2.0 / (t[-1] + dt)] = 0.0  # at least two cycles in the window
-    if forced_hz is not None:
-        spectrum[np.abs(freqs - forced_hz) < 1.5 / (t[-1] + dt)] = 0.0  # the forced line's own width
-    f0 = float(freqs[int(np.argmax(spectrum))])
+        forced0 = (float(b[0]), float(b[1]))
+        away.append((forced_hz, 1.5 / (t[-1] + dt)))  # the forced line's own width
+    f0 = _spectral_peak(t, x, dt, away)
     if not f0 > 0:
-        return None
+        return []
     w0 = 2.0 * math.pi * f0
     a0 = float(np.max(np.abs(x[: max(3, int(round(1.0 / (f0 * dt))))])))
-    p0 = [a0, 0.03 * w0, w0, 0.0, float(v.mean())]
-    if forced is None:
-        model = _ringdown
-    else:
-        def model(tt, a, sigma, wd, phi, c, bs, bc):
-            return _ringdown(tt, a, sigma, wd, phi, c) + bs * np.sin(wf * tt) + bc * np.cos(wf * tt)
-        p0 += [float(b[0]), float(b[1])]
-    try:
-        # A fit that wanders (a growing exponential overflows) or whose covariance cannot be estimated
-        # is refused below (σ > 0, finite residual and covariance): no warning on the way.
-        with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore"):
-            warnings.simplefilter("ignore", OptimizeWarning)
-            popt, pcov = curve_fit(model, t, v, p0=p0, maxfev=20000)
-            residual = v - model(t, *popt)
-    except (RuntimeError, ValueError):
-        return None
-    a, sigma, wd = popt[:3]
-    if not np.all(np.isfinite(residual)):
-        return None
-    scatter = float(np.std(residual))
-    if abs(a) < MIN_SNR * max(scatter, noise or 0.0) or not (wd > 0 and sigma > 0) or not np.all(np.isfinite(pcov)):
-        return None
-    # Residuals that follow each other (tracking errors, what is left of the servo's forced
-    # motion) carry less information than white ones: the covariance grows by the AR(1)
-    # factor (1 + ρ)/(1 − ρ) of their lag-1 autocorrelation ρ (≥ 0).
-    r = residual - residual.mean()
-    rho = float(r[1:] @ r[:-1]) / float(r @ r) if float(r @ r) > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.95)
-    pcov = pcov * (1.0 + rho) / (1.0 - rho)
-    wn = math.hypot(wd, sigma)
-    # Delta method: f = hypot(wd, σ)/2π, ζ = σ / hypot(wd, σ).
-    jf = np.array([wd, sigma]) / (wn * 2.0 * math.pi)  # d f / d(wd, σ)... ordered (σ, wd) below
-    cov = pcov[np.ix_([1, 2], [1, 2])]  # (σ, wd)
-    g_f = np.array([jf[1], jf[0]])
-    g_z = np.array([wd**2 / wn**3, -sigma * wd / wn**3])
-    f, z = wn / (2.0 * math.pi), sigma / wn
-    if z > MAX_MODE_DAMPING:
-        return None
-    se_f = math.hypot(math.sqrt(max(float(g_f @ cov @ g_f), 0.0)), MODE_SYSTEMATIC["frequency"] * f)
-    se_z = math.hypot(math.sqrt(max(float(g_z @ cov @ g_z), 0.0)), MODE_SYSTEMATIC["damping"] * z)
-    return ModeFit(f, se_f, z, se_z, float(abs(a)), source)
+    first = _fit_ringdowns(t, v, [[a0, 0.03 * w0, w0, 0.0]], float(v.mean()), forced_hz, forced0, noise, source)
+    if not first or first[0] is None:
+        return []
+    if max_modes < 2:
+        return [first[0]]
+    m1 = first[0]
+    # What the first mode leaves: its own fit's residual, less a level.
+    w1 = 2.0 * math.pi * m1.frequency_hz
+    p1 = _refit_start(t, v, m1, forced_hz)
+    x2 = v - p1
+    away2 = away + [(m1.frequency_hz, max(3.0 * m1.damping_ratio * m1.frequency_hz, 1.5 / (t[-1] + dt)))]
+    f2 = _spectral_peak(t, x2 - x2.mean(), dt, away2)
+    if not f2 > 0:
+        return [m1]
+    w2 = 2.0 * math.pi * f2
+    a2 = float(np.max(np.abs((x2 - x2.mean())[: max(3, int(round(1.0 / (f2 * dt))))])))
+    start1 = [m1.amplitude, m1.damping_ratio * w1, w1 * math.sqrt(1.0 - m1.damping_ratio**2), _phase0(t, v, m1)]
+    both = _fit_ringdowns(t, v, [start1, [a2, 0.03 * w2, w2, 0.0]], float(v.mean()), forced_hz, forced0, noise,
+                          source)
+    if not both or any(m is None for m in both):
+        return [m1]
+    a, b2 = both
+    apart = abs(a.frequency_hz - b2.frequency_hz) > max(a.damping_ratio * a.frequency_hz
+                                                         + b2.damping_ratio * b2.frequency_hz,
+                                                         0.03 * a.frequency_hz)
+    if not apart:
+        return [m1]
+    return [a, b2] if a.amplitude >= b2.amplitude else [b2, a]
+
+
+def _refit_start(t: np.ndarray, v: np.ndarray, mode: ModeFit, forced_hz: float | None) -> np.ndarray:
+    """The first mode's (and forced line's, level's) least-squares part of ``v`` at its fitted frequency and damping."""
+    wn = 2.0 * math.pi * mode.frequency_hz
+    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
+    env = np.exp(-sigma * t)
+    cols = [env * np.cos(wd * t), env * np.sin(wd * t), np.ones_like(t)]
+    if forced_hz is not None:
+        wf = 2.0 * math.pi * forced_hz
+        cols += [np.sin(wf * t), np.cos(wf * t)]
+    design = np.column_stack(cols)
+    return design @ np.linalg.lstsq(design, v, rcond=None)[0]
+
+
+def _phase0(t: np.ndarray, v: np.ndarray, mode: ModeFit) -> float:
+    """The first mode's phase at the window's start, from a linear fit at its frequency and damping."""
+    wn = 2.0 * math.pi * mode.frequency_hz
+    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
+    env = np.exp(-sigma * t)
+    design = np.column_stack([env * np.cos(wd * t), env * np.sin(wd * t), np.ones_like(t)])
+    c, s_, _ = np.linalg.lstsq(design, v, rcond=None)[0]
+    return math.atan2(-s_, c)
 
 
 def pool_modes(modes: list[ModeFit], source: str) -> ModeFit | None:
