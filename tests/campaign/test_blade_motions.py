@@ -178,3 +178,22 @@ def test_extra_markers_bad_input(tmp_path):
         (tmp_path / "bad.toml").write_text(text.replace('extra = ["#1f77b4"]', bad))
         with pytest.raises(ServoscopeError, match=why):
             load_campaign(tmp_path / "bad.toml")
+
+
+def test_a_rolling_shutter_is_said_beside_the_bending(tmp_path):
+    """Markers on other rows are seen at other times under a rolling shutter: the track says by how much."""
+    from servoscope.markers import TrackerSettings, track_video
+    from servoscope.simulate import simulate_campaign
+
+    simulate_campaign(tmp_path, "quick", 0, codec="raw", width=320, height=256, fps=50, exposure_s=0.02,
+                      readout_s=0.015, frequencies_hz=(), step_after_t0_s=0.3, extra_stickers=EXTRAS[:1])
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    video = tmp_path / truth["tests"][0]["video"]
+    tr = track_video(video, TrackerSettings(readout_s=0.015, extra=("#1f77b4",)))
+    said = [w for w in tr.warnings if w.startswith("rolling shutter")]
+    assert tr.n_valid == tr.n_frames and len(said) == 1
+    # Its numbers: the rows apart and the time apart, 15 ms over 256 rows.
+    rows = float(said[0].split(" rows apart")[0].rsplit(" ", 1)[1])
+    ms = float(said[0].split(" ms apart")[0].rsplit(" ", 1)[1])
+    assert ms == pytest.approx(15.0 * rows / 256, rel=0.05)
+    assert not any(w.startswith("rolling shutter") for w in track_video(video, TrackerSettings(readout_s=0.015)).warnings)

@@ -250,6 +250,13 @@ def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
         warnings += [w for w in (_as_extra(w, names_in_pass) for w in got.warnings
                                  if not w.startswith(("LED", "no LED"))) if w not in warnings]
     _refuse_coinciding(path, track, xy, extras)
+    if settings.readout_s > 0 and track.snapshot_rgb is not None:
+        # Each marker is seen at its own rows' time: the bending is not corrected for it.
+        rows = np.concatenate([track.lead_xy_px[:, None, 1], track.trail_xy_px[:, None, 1], xy[..., 1]], axis=1)
+        spread = float(np.nanmedian(np.nanmax(rows, axis=1) - np.nanmin(rows, axis=1)))
+        skew_ms = 1e3 * settings.readout_s * spread / track.snapshot_rgb.shape[0]
+        warnings.append(f"rolling shutter: the markers lie {spread:.0f} rows apart and are seen up to {skew_ms:.2g} ms "
+                        "apart; their bending includes the blade's motion over that time (not corrected)")
     points = np.concatenate([track.lead_xy_px[:, None], track.trail_xy_px[:, None], xy], axis=1)
     sig = np.concatenate([track.lead_sigma_px[:, None], track.trail_sigma_px[:, None], sigma], axis=1)
     if not valid.any():
