@@ -208,6 +208,22 @@ class HeaveModel:
                    d["chi2_reduced"], d["n_dwells"])
 
 
+def _heave_over_pitch(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, float, float]]):
+    """Each dwell's heave over its pitch: frequencies, complex ratios (px/rad) and their errors; None under 3 dwells.
+
+    A ratio's error is isotropic in the complex plane: its modulus times the larger of its
+    relative gain error and its phase error.
+    """
+    data = [(r, pitch[r.label]) for r in rows if r.label in pitch and pitch[r.label][0] > 0]
+    if len(data) < 3:
+        return None
+    f = np.array([r.frequency_hz for r, _ in data])
+    z = np.array([r.gain / p[0] * np.exp(1j * (math.radians(r.phase_deg) - p[2])) for r, p in data])
+    rel = np.array([max(math.hypot(r.gain_stderr / r.gain if r.gain > 0 else np.inf, p[1] / p[0]),
+                        math.hypot(math.radians(r.phase_stderr_deg), p[3])) for r, p in data])
+    return f, z, np.abs(z) * np.minimum(rel, 1e6) + 1e-12
+
+
 def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, float, float]],
                     start_hz: float | list[float] | None = None) -> HeaveModel | None:
     """Fit :class:`HeaveModel` to the dwells' heave over their pitch; None when it cannot be told.
@@ -234,21 +250,18 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
 
     from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit
 
-    data = [(r, pitch[r.label]) for r in rows if r.label in pitch and pitch[r.label][0] > 0]
-    if len(data) < 3:
+    ratios = _heave_over_pitch(rows, pitch)
+    if ratios is None:
         return None
-    f = np.array([r.frequency_hz for r, _ in data])
-    z = np.array([r.gain / p[0] * np.exp(1j * (math.radians(r.phase_deg) - p[2])) for r, p in data])
-    rel = np.array([max(math.hypot(r.gain_stderr / r.gain if r.gain > 0 else np.inf, p[1] / p[0]),
-                        math.hypot(math.radians(r.phase_stderr_deg), p[3])) for r, p in data])
-    sd = np.abs(z) * np.minimum(rel, 1e6) + 1e-12
+    f, z, sd = ratios
+    n_dwells = f.size
     w = 2.0 * math.pi * f
     known = [tuple(float(u) for u in np.atleast_1d(v)) for v in
              ([start_hz] if np.isscalar(start_hz) else (start_hz or []))]
     n = max(len(known), 1)
     # Modes beyond what the dwells can tell (3 parameters each, 3 dwells per mode) keep the
     # step's frequency and damping; only their κ is fitted, so that they do not bend the first.
-    free = n if len(data) >= 3 * n else 1
+    free = n if n_dwells >= 3 * n else 1
     held = [(k[0], k[1] if len(k) > 1 else 0.05) for k in known[free:]]
 
     def unpack(x):
@@ -289,7 +302,7 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
     if best is None:
         return None
     x = [float(v) for v in best.x]
-    dof = max(2 * len(data) - len(x), 1)
+    dof = max(2 * n_dwells - len(x), 1)
     chi2 = 2.0 * float(best.cost) / dof
     try:
         cov = np.linalg.inv(best.jac.T @ best.jac) * max(chi2, 1.0)
@@ -312,4 +325,4 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
             terms.append((kappa, float(se[3 * free + j - free]), ModeFit(fm, math.nan, zeta, math.nan, abs(kappa),
                                                                          "held")))
     return HeaveModel(tuple(t[0] for t in terms), tuple(t[1] for t in terms), tuple(t[2] for t in terms), chi2,
-                      len(data))
+                      n_dwells)
