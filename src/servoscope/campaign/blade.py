@@ -206,7 +206,7 @@ def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[st
         for k, colour in enumerate(track.extra_colours):
             row = dwell_heave(track.angle_time_s, track.bending_px[:, 2 + k], test.frequency_hz, t0, test.amplitude,
                               fit.window_s, test.label, names[2 + k], colour or campaign.extra[k],
-                              systematic_px=heave_systematic_px(track.intra), mode=_mode_of(modes))
+                              systematic_px=heave_systematic_px(track.intra, bending=True), mode=_mode_of(modes))
             if row is not None:
                 rows.append(row)
     return rows
