@@ -138,7 +138,8 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
     # The report's blade motions: the mode shape's table and frame.
     html = build_report(res)
     assert "Blade motions" in html and "Blade motions frame" in html and "relative to the lead" in html
-    assert "bending gain (px per input unit)" in html
+    assert "bending gain (px per input unit)" in html and "Bending against frequency" in html
+    assert "9 Hz and 21 Hz mode shapes" in html
     # Saved and read back to the byte.
     res.write(tmp_path / "out")
     back = IdentificationResult.load(tmp_path / "out")

@@ -406,7 +406,7 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
                  for m, c, a, sa, r, p, sp in zip(sh.markers, sh.colours, sh.amplitude_px, sh.amplitude_stderr_px,
                                                   sh.relative(), sh.phase_deg, sh.phase_stderr_deg)])
     if shaped:
-        frame = _blade_frame(result, shaped[0])
+        frame = _blade_frame(result, shaped)
         if frame is not None:
             s.figure(frame, "A frame of the step with every marker (squares), the chord line through the lead and "
                      "trail markers, and the mode's shape: each marker's ring-down across the chord line, drawn "
@@ -450,11 +450,17 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
                   *format_with_uncertainty(r.gain, r.gain_stderr),
                   *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3)]
                  for r in result.bending_response])
+        by_marker: dict[str, list] = {}
+        for r in result.bending_response:
+            by_marker.setdefault(f"{r.marker} ({r.colour})", []).append(r)
+        s.figure(heave_figure([], result.modes, series=by_marker, what="bending"), "Each extra marker's bending "
+                 "(its distance across the lead–trail line) at each dwell's frequency, against the input. Error bars: "
+                 "±1 standard error, the systematic floor included.", "Bending against frequency", name="bending")
     return s
 
 
-def _blade_frame(result: "IdentificationResult", mode):
-    """The blade motions frame: the step's snapshot, every marker, the mode's shape exaggerated; None without a step."""
+def _blade_frame(result: "IdentificationResult", modes):
+    """The blade motions frame: the step's snapshot, every marker, the modes' shapes exaggerated; None without a step."""
     label = result.step_label
     track = result.tracks.get(label) if label else None
     if track is None or track.extra_xy_px is None:
@@ -466,12 +472,16 @@ def _blade_frame(result: "IdentificationResult", mode):
     camera = result.campaign.camera
     if camera is not None and track.snapshot_rgb is not None:
         pts = camera.distort_points(pts)
-    shape = np.asarray(mode.shape.amplitude_px) * np.cos(np.radians(mode.shape.phase_deg))
     span = float(np.hypot(*(pts[0] - pts[1])))
-    scale = 0.1 * span / max(float(np.max(np.abs(shape))), 1e-9)
-    return blade_frame_figure(track.snapshot_rgb, pts, list(mode.shape.markers), shape, scale=scale,
-                              title=f"{label}, frame {i}: every marker and the {mode.frequency_hz:.3g} Hz mode's "
-                                    "shape (exaggerated)")
+    drawn = []
+    for mode in modes:
+        shape = np.asarray(mode.shape.amplitude_px) * np.cos(np.radians(mode.shape.phase_deg))
+        scale = 0.1 * span / max(float(np.max(np.abs(shape))), 1e-9)
+        drawn.append((shape, scale, f"{mode.frequency_hz:.3g} Hz mode ×{scale:.3g}"))
+    which = " and ".join(f"{m.frequency_hz:.3g} Hz" for m in modes)
+    return blade_frame_figure(track.snapshot_rgb, pts, list(modes[0].shape.markers), None,
+                              title=f"{label}, frame {i}: every marker and the {which} mode shapes (exaggerated)",
+                              more=drawn)
 
 
 def _segmentation(result: "IdentificationResult", track, lead, trail):

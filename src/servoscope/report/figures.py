@@ -287,17 +287,23 @@ def candidate_traces_figure(trace, candidates) -> Figure:
     return fig
 
 
-def heave_figure(rows, modes, curve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Figure:
+def heave_figure(rows, modes, curve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
+                 series: dict[str, list] | None = None, what: str = "heave") -> Figure:
     """The blade's heave per dwell against frequency (gain px per input unit, phase), its modes marked.
 
     A second frequency response beside the pitch's: ``rows`` are
     :class:`~servoscope.sysid.heave.HeaveRow`, ``modes`` :class:`~servoscope.sysid.modes.ModeFit`;
-    ``curve`` (frequency Hz, gain, phase deg) the fitted flapping model's.
+    ``curve`` (frequency Hz, gain, phase deg) the fitted flapping model's. ``series`` (label →
+    rows) draws several, e.g. each marker's bending (``what="bending"``), instead of ``rows``.
     """
     fig, (ax_g, ax_p) = plt.subplots(2, 1, figsize=(7.5, 5.4), sharex=True)
-    f = np.array([r.frequency_hz for r in rows])
-    ax_g.errorbar(f, [r.gain for r in rows], yerr=[r.gain_stderr for r in rows], fmt="o", capsize=3, label="measured")
-    ax_p.errorbar(f, [r.phase_deg for r in rows], yerr=[r.phase_stderr_deg for r in rows], fmt="o", capsize=3)
+    for k, (label, these) in enumerate((series or {"measured": rows}).items()):
+        f = np.array([r.frequency_hz for r in these]) * (1.0 + 0.01 * k)  # side by side where they share a dwell
+        ax_g.errorbar(f, [r.gain for r in these], yerr=[r.gain_stderr for r in these], fmt="o", capsize=3,
+                      label=label)
+        ax_p.errorbar(f, [r.phase_deg for r in these], yerr=[r.phase_stderr_deg for r in these], fmt="o", capsize=3)
+    if series:
+        ax_g.legend(fontsize=7)
     if curve is not None:
         ax_g.plot(curve[0], curve[1], "-", color="C1", lw=1.2, label="fitted mode × pitch model")
         ax_p.plot(curve[0], curve[2], "-", color="C1", lw=1.2)
@@ -308,16 +314,17 @@ def heave_figure(rows, modes, curve: tuple[np.ndarray, np.ndarray, np.ndarray] |
             ax.axvline(m.frequency_hz, color="0.4", lw=0.8, ls="--")
     ax_g.set_xscale("log")
     ax_g.set_yscale("log")
-    ax_g.set_ylabel("heave gain (px per input unit)")
-    ax_p.set_ylabel("heave phase (deg)")
+    ax_g.set_ylabel(f"{what} gain (px per input unit)")
+    ax_p.set_ylabel(f"{what} phase (deg)")
     ax_p.set_xlabel("frequency (Hz)")
-    ax_g.set_title("The blade's heave at each dwell's frequency (dashed: its mode, shaded: ±ζ)", fontsize=9)
+    ax_g.set_title(f"The blade's {what} at each dwell's frequency (dashed: its modes, shaded: ±ζ)", fontsize=9)
     fig.tight_layout()
     return fig
 
 
 def blade_frame_figure(frame_rgb: np.ndarray | None, points_xy_px: np.ndarray, names: Sequence[str],
-                       shape: Sequence[float] | None, *, scale: float = 1.0, title: str = "") -> Figure:
+                       shape: Sequence[float] | None, *, scale: float = 1.0, title: str = "",
+                       more: Sequence[tuple[Sequence[float], float, str]] = ()) -> Figure:
     """A frame with every marker, the chord line through the lead and trail, and a mode's shape drawn exaggerated.
 
     Parameters
@@ -330,6 +337,8 @@ def blade_frame_figure(frame_rgb: np.ndarray | None, points_xy_px: np.ndarray, n
     shape : sequence of float or None
         Each marker's displacement across the chord line in the mode (px, up positive), drawn
         ``scale`` times as long, the displaced markers joined in order along the chord.
+    more : sequence of (shape, scale, label)
+        Other modes' shapes, drawn alike in other colours.
     """
     pts = np.asarray(points_xy_px, dtype=float)
     if frame_rgb is not None:
@@ -348,12 +357,13 @@ def blade_frame_figure(frame_rgb: np.ndarray | None, points_xy_px: np.ndarray, n
     for (x, y), name in zip(pts, names):
         ax.plot([x], [y], "s", ms=7, mfc="none", mec="white", mew=1.5)
         ax.annotate(name, (x, y), xytext=(6, 8), textcoords="offset points", color="white", fontsize=8)
-    if shape is not None:
-        moved = pts + scale * np.asarray(shape, dtype=float)[:, None] * up[None, :]
-        order = np.argsort((pts - trail) @ d)
+    drawn = ([(shape, scale, f"mode shape ×{scale:.3g}")] if shape is not None else []) + list(more)
+    order = np.argsort((pts - trail) @ d)
+    for (sh, sc, label), colour in zip(drawn, ("yellow", "cyan", "magenta")):
+        moved = pts + sc * np.asarray(sh, dtype=float)[:, None] * up[None, :]
         for p, q in zip(pts, moved):
-            ax.annotate("", q, p, arrowprops={"arrowstyle": "->", "color": "yellow", "lw": 1.2})
-        ax.plot(moved[order, 0], moved[order, 1], "--", color="yellow", lw=1.2, label=f"mode shape ×{scale:.3g}")
+            ax.annotate("", q, p, arrowprops={"arrowstyle": "->", "color": colour, "lw": 1.2})
+        ax.plot(moved[order, 0], moved[order, 1], "--", color=colour, lw=1.2, label=label)
     ax.legend(fontsize=7, loc="lower right")
     ax.set_title(title or "Every marker, the chord line and the mode's shape (exaggerated)", fontsize=9)
     ax.set_axis_off()
