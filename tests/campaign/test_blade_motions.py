@@ -139,7 +139,7 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
     html = build_report(res)
     assert "Blade motions" in html and "Blade motions frame" in html and "relative to the lead" in html
     assert "bending gain (px per input unit)" in html and "Bending against frequency" in html
-    assert "9 Hz and 21 Hz mode shapes" in html
+    assert html.count("marker (mode at") == 2  # a shape table for each of the step's modes
     # Saved and read back to the byte.
     res.write(tmp_path / "out")
     back = IdentificationResult.load(tmp_path / "out")
