@@ -281,6 +281,13 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
     click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
                f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
+    if result.bending_px is not None and result.n_valid:
+        # Each extra marker's bending: how far it moved across the lead–trail line (its columns in the CSV).
+        import numpy as np
+
+        spread = np.nanstd(result.bending_px[result.valid, 2:], axis=0)
+        click.echo(f"{name}: bending across the lead–trail line, RMS: " + ", ".join(
+            f"extra{k + 1} ({c}) {v:.3f} px" for k, (c, v) in enumerate(zip(result.extra_colours, spread))))
     _say_frame_of_reference_and_shutter(name, result, exposure_s)
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)

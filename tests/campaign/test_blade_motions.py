@@ -198,3 +198,25 @@ def test_a_rolling_shutter_is_said_beside_the_bending(tmp_path):
     ms = float(said[0].split(" ms apart")[0].rsplit(" ", 1)[1])
     assert ms == pytest.approx(15.0 * rows / 256, rel=0.05)
     assert not any(w.startswith("rolling shutter") for w in track_video(video, TrackerSettings(readout_s=0.015)).warnings)
+
+
+def test_command_line_extra_markers(tmp_path):
+    """`servoscope track --extra`: the bending line and columns; a colour of another marker's: one line, exit 2."""
+    import subprocess
+    import sys
+
+    _, truth = _render(tmp_path, frequencies_hz=(), extra_stickers=EXTRAS[:1], step_after_t0_s=0.4)
+    video = tmp_path / truth["tests"][0]["video"]
+    run = [sys.executable, "-m", "servoscope", "track", str(video)]
+    ok = subprocess.run(run + ["--extra", "#1f77b4", "--out", str(tmp_path / "t.csv")], capture_output=True,
+                        text=True, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    assert "bending across the lead–trail line, RMS: extra1 (#1f77b4)" in ok.stdout
+    header = (tmp_path / "t.csv").read_text().splitlines()[0].split(",")
+    assert {"extra1_x_px", "extra1_y_px", "extra1_bending_px", "lead_bending_px"} <= set(header)
+    bad = subprocess.run(run + ["--extra", "#d62728", "--out", str(tmp_path / "bad.csv")], capture_output=True,
+                         text=True, timeout=300)
+    assert bad.returncode == 2 and not (tmp_path / "bad.csv").exists()
+    assert bad.stderr.strip().splitlines() == [
+        "servoscope: error: extra marker 1: #d62728 has the same colour as the lead marker: give each marker a "
+        "colour of its own"]
