@@ -126,11 +126,9 @@ def print_blade_motions(result, truth: dict | None) -> None:
         f, fe = format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)
         z, ze = format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr)
         table.add_row(m.source, f"{f} ± {fe}",
-                      format_interval(m.frequency_hz - 1.96 * m.frequency_stderr_hz,
-                                      m.frequency_hz + 1.96 * m.frequency_stderr_hz, m.frequency_stderr_hz),
+                      format_interval(*m.ci95["frequency_hz"], m.frequency_stderr_hz),
                       f"{z} ± {ze}",
-                      format_interval(m.damping_ratio - 1.96 * m.damping_ratio_stderr,
-                                      m.damping_ratio + 1.96 * m.damping_ratio_stderr, m.damping_ratio_stderr),
+                      format_interval(*m.ci95["damping_ratio"], m.damping_ratio_stderr),
                       *((f"{fmt(true.get('frequency_hz'))} Hz, {fmt(true.get('damping_ratio'))}",) if true else ()))
     console = Console(highlight=False, width=112)
     console.print(table)

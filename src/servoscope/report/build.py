@@ -391,11 +391,9 @@ def _blade_section(result: "IdentificationResult", figures_dir) -> ReportSection
                  "95 % interval"],
                 [[_SOURCES.get(m.source, m.source),
                   *format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz),
-                  format_interval(m.frequency_hz - 1.96 * m.frequency_stderr_hz,
-                                  m.frequency_hz + 1.96 * m.frequency_stderr_hz, m.frequency_stderr_hz),
+                  format_interval(*m.ci95["frequency_hz"], m.frequency_stderr_hz),
                   *format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr),
-                  format_interval(m.damping_ratio - 1.96 * m.damping_ratio_stderr,
-                                  m.damping_ratio + 1.96 * m.damping_ratio_stderr, m.damping_ratio_stderr)]
+                  format_interval(*m.ci95["damping_ratio"], m.damping_ratio_stderr)]
                  for m in result.modes])
     shaped = [m for m in result.modes if m.shape is not None]
     for mode in shaped:

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..results import jsonable
 from .hac import hac_covariance
+from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit, ringdown_columns
 
 __all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_REL", "HeaveModel", "HeaveRow",
            "dwell_heave", "fit_heave_model", "heave_systematic_px"]
@@ -116,13 +117,8 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
     span = float(window_s[1] - window_s[0])
     modes = [] if mode is None else [mode] if np.isscalar(mode[0]) else list(mode)
     for fm, z in modes:
-        if not (span > 0 and abs(fm - frequency_hz) > 1.0 / span):
-            continue
-        wn = 2.0 * math.pi * fm
-        tau = t[inside] - window_s[0]
-        env = np.exp(-z * wn * tau)
-        wd = wn * math.sqrt(max(1.0 - z * z, 0.0))
-        columns += [env * np.cos(wd * tau), env * np.sin(wd * tau)]
+        if span > 0 and abs(fm - frequency_hz) > 1.0 / span:
+            columns += ringdown_columns(t[inside] - window_s[0], fm, z)
     design = np.column_stack(columns)
     coef, *_ = np.linalg.lstsq(design, h[inside], rcond=None)
     cov = hac_covariance(design, h[inside] - design @ coef)
@@ -163,7 +159,7 @@ class HeaveModel:
 
     gains_px_per_rad: tuple[float, ...]
     gain_stderrs_px_per_rad: tuple[float, ...]
-    modes: tuple[Any, ...]
+    modes: tuple[ModeFit, ...]
     chi2_reduced: float
     n_dwells: int
 
@@ -186,8 +182,7 @@ class HeaveModel:
         w = 2.0 * math.pi * np.asarray(frequency_hz, dtype=float)
         out = np.zeros(w.shape, dtype=complex)
         for kappa, m in zip(self.gains_px_per_rad, self.modes):
-            wm, z = 2.0 * math.pi * m.frequency_hz, m.damping_ratio
-            out = out + kappa * w**2 / (wm**2 - w**2 + 2j * z * wm * w)
+            out = out + _mode_term(w, kappa, m.frequency_hz, m.damping_ratio)
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -205,8 +200,6 @@ class HeaveModel:
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> "HeaveModel":
         """The model back from :meth:`summary`'s dict."""
-        from .modes import ModeFit
-
         terms = d.get("modes") or [d]
         def nan_if_none(v):
             return math.nan if v is None else v
@@ -215,6 +208,12 @@ class HeaveModel:
                               "held" if t.get("held") else "heave_response") for t in terms)
         return cls(tuple(t["gain_px_per_rad"] for t in terms), tuple(t["gain_stderr_px_per_rad"] for t in terms), modes,
                    d["chi2_reduced"], d["n_dwells"])
+
+
+def _mode_term(w: np.ndarray, kappa: float, frequency_hz: float, damping_ratio: float) -> np.ndarray:
+    """One mode's heave over pitch at ω (rad/s): ``κ·ω² / (ωm² − ω² + 2j·ζ·ωm·ω)``."""
+    wm = 2.0 * math.pi * frequency_hz
+    return kappa * w**2 / (wm**2 - w**2 + 2j * damping_ratio * wm * w)
 
 
 def _heave_over_pitch(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, float, float]]):
@@ -257,8 +256,6 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
     """
     from scipy.optimize import least_squares
 
-    from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit
-
     ratios = _heave_over_pitch(rows, pitch)
     if ratios is None:
         return None
@@ -280,8 +277,7 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
     def model(x):
         out = np.zeros(w.shape, dtype=complex)
         for kappa, fm, zeta in unpack(x):
-            wm = 2.0 * math.pi * fm
-            out = out + kappa * w**2 / (wm**2 - w**2 + 2j * zeta * wm * w)
+            out = out + _mode_term(w, kappa, fm, zeta)
         return out
 
     def resid(x):
@@ -293,8 +289,7 @@ def fit_heave_model(rows: list[HeaveRow], pitch: dict[str, tuple[float, float, f
     for fms in start_sets:
         x0, lo, hi = [], [], []
         for fm0 in fms:
-            wm0 = 2.0 * math.pi * fm0
-            shape = w**2 / (wm0**2 - w**2 + 2j * 0.05 * wm0 * w)
+            shape = _mode_term(w, 1.0, fm0, 0.05)
             kappa0 = float(np.real(np.vdot(shape / sd, z / sd)) / np.real(np.vdot(shape / sd, shape / sd)))
             x0 += [kappa0, fm0, 0.05]
             lo += [-np.inf, 0.2 * f.min(), 1e-4]

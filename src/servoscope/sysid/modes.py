@@ -25,7 +25,7 @@ from servoscope.results import jsonable
 from .hac import hac_covariance
 
 __all__ = ["ModeFit", "ModeShape", "fit_damped_mode", "fit_damped_modes", "fit_mode_shape", "fit_mode_shapes",
-           "pool_modes"]
+           "pool_modes", "ringdown_columns"]
 
 #: A ring-down is taken as seen when its amplitude is this many times the signal's noise.
 MIN_SNR = 10.0
@@ -67,15 +67,20 @@ class ModeFit:
     source: str
     shape: "ModeShape | None" = None
 
+    @property
+    def ci95(self) -> dict[str, tuple[float, float]]:
+        """95 % intervals (normal, from the standard errors) of ``frequency_hz`` and ``damping_ratio``."""
+        return {"frequency_hz": (self.frequency_hz - _Z95 * self.frequency_stderr_hz,
+                                 self.frequency_hz + _Z95 * self.frequency_stderr_hz),
+                "damping_ratio": (self.damping_ratio - _Z95 * self.damping_ratio_stderr,
+                                  self.damping_ratio + _Z95 * self.damping_ratio_stderr)}
+
     def summary(self) -> dict[str, Any]:
         """Plain types, for result.json's ``modes``."""
         return jsonable({
             "frequency_hz": self.frequency_hz, "damping_ratio": self.damping_ratio,
             "stderr": {"frequency_hz": self.frequency_stderr_hz, "damping_ratio": self.damping_ratio_stderr},
-            "ci95": {"frequency_hz": [self.frequency_hz - _Z95 * self.frequency_stderr_hz,
-                                      self.frequency_hz + _Z95 * self.frequency_stderr_hz],
-                     "damping_ratio": [self.damping_ratio - _Z95 * self.damping_ratio_stderr,
-                                       self.damping_ratio + _Z95 * self.damping_ratio_stderr]},
+            "ci95": {k: list(v) for k, v in self.ci95.items()},
             "amplitude": self.amplitude, "source": self.source,
             **({"shape": self.shape.summary()} if self.shape is not None else {})})
 
@@ -129,6 +134,18 @@ class ModeShape:
                                                           "phase_deg", "phase_stderr_deg")))
 
 
+def ringdown_columns(t: np.ndarray, frequency_hz: float, damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """A mode's two free-decay columns at times ``t`` from its start: ``e^(−σt)·cos ω_d t`` and ``e^(−σt)·sin ω_d t``.
+
+    σ = ζ·ωn and ω_d = ωn·√(1 − ζ²), ωn = 2π·``frequency_hz``: the basis in which a ring-down of
+    any amplitude and phase is linear (mode shapes, a dwell's heave beside its sine).
+    """
+    wn = 2.0 * math.pi * frequency_hz
+    sigma, wd = damping_ratio * wn, wn * math.sqrt(max(1.0 - damping_ratio**2, 0.0))
+    env = np.exp(-sigma * t)
+    return env * np.cos(wd * t), env * np.sin(wd * t)
+
+
 def fit_mode_shape(time_s: np.ndarray, signals: np.ndarray, start_s: float, mode: ModeFit,
                    markers: tuple[str, ...], colours: tuple[str, ...], *,
                    systematic_px: float = 0.0) -> ModeShape | None:
@@ -157,10 +174,7 @@ def fit_mode_shapes(time_s: np.ndarray, signals: np.ndarray, start_s: float, mod
     tt = t[keep] - start_s
     columns = []
     for mode in modes:
-        wn = 2.0 * math.pi * mode.frequency_hz
-        sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
-        env = np.exp(-sigma * tt)
-        columns += [env * np.cos(wd * tt), env * np.sin(wd * tt)]
+        columns += ringdown_columns(tt, mode.frequency_hz, mode.damping_ratio)
     design = np.column_stack(columns + [np.ones_like(tt)])
     amps = np.zeros((len(modes), y.shape[1]))
     amp_se, phases, phase_se = np.zeros_like(amps), np.zeros_like(amps), np.zeros_like(amps)
@@ -381,10 +395,7 @@ def fit_damped_modes(time_s: np.ndarray, y: np.ndarray, start_s: float, *, noise
 
 def _refit_start(t: np.ndarray, v: np.ndarray, mode: ModeFit, forced_hz: float | None) -> np.ndarray:
     """The first mode's (and forced line's, level's) least-squares part of ``v`` at its fitted frequency and damping."""
-    wn = 2.0 * math.pi * mode.frequency_hz
-    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
-    env = np.exp(-sigma * t)
-    cols = [env * np.cos(wd * t), env * np.sin(wd * t), np.ones_like(t)]
+    cols = [*ringdown_columns(t, mode.frequency_hz, mode.damping_ratio), np.ones_like(t)]
     if forced_hz is not None:
         wf = 2.0 * math.pi * forced_hz
         cols += [np.sin(wf * t), np.cos(wf * t)]
@@ -394,10 +405,7 @@ def _refit_start(t: np.ndarray, v: np.ndarray, mode: ModeFit, forced_hz: float |
 
 def _phase0(t: np.ndarray, v: np.ndarray, mode: ModeFit) -> float:
     """The first mode's phase at the window's start, from a linear fit at its frequency and damping."""
-    wn = 2.0 * math.pi * mode.frequency_hz
-    sigma, wd = mode.damping_ratio * wn, wn * math.sqrt(max(1.0 - mode.damping_ratio**2, 0.0))
-    env = np.exp(-sigma * t)
-    design = np.column_stack([env * np.cos(wd * t), env * np.sin(wd * t), np.ones_like(t)])
+    design = np.column_stack([*ringdown_columns(t, mode.frequency_hz, mode.damping_ratio), np.ones_like(t)])
     c, s_, _ = np.linalg.lstsq(design, v, rcond=None)[0]
     return math.atan2(-s_, c)
 
