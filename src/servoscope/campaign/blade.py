@@ -47,10 +47,9 @@ def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str
         return []
     t0_s = step.t0_s
     heave = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
-    before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
-    noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
     settled = _ringdown_start_s(step, model)
-    modes = fit_damped_modes(track.angle_time_s, heave, t0_s + settled, noise=noise, source="step")
+    modes = fit_damped_modes(track.angle_time_s, heave, t0_s + settled, noise=_noise_before(track, heave, t0_s),
+                             source="step")
     if modes and track.bending_px is not None:
         # Which markers move in each: each one's distance across the chord line (the line's heave
         # plus its own bending), its ring-downs at the modes' frequencies and dampings.
@@ -61,11 +60,23 @@ def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str
     return modes
 
 
+def _noise_before(track: Track, heave: np.ndarray, t0_s: float) -> float | None:
+    """The heave's noise: its frame-to-frame scatter before the input starts; None with 5 frames or fewer."""
+    before = heave[(track.angle_time_s < t0_s) & np.isfinite(heave)]
+    return float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
+
+
+def _four_time_constants_s(model, otherwise_s: float) -> float:
+    """Four of the servo model's time constants 1/(ζ·ωn): its own motion has died to 2 % of its start
+    (``otherwise_s`` when the model has none)."""
+    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
+    return 4.0 / decay if decay > 0 and math.isfinite(decay) else otherwise_s
+
+
 def _ringdown_start_s(step, model) -> float:
     """When the step's free motion starts, after t0: the servo settled, and four time constants more."""
     settled = step.settling_time_s if math.isfinite(step.settling_time_s) else (step.dead_time_s or 0.0) + 0.3
-    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
-    return settled + (4.0 / decay if decay > 0 else 0.2)
+    return settled + _four_time_constants_s(model, 0.2)
 
 
 #: The least free motion after the step that a mode is fitted to: this many of its periods.
@@ -103,13 +114,19 @@ def axis_of(tracks: dict[str, Track], fits: dict[str, SineFit], axis_track: Trac
     return None
 
 
-def _dwell_heaves(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot):
-    """Each fitted dwell with a known input start: (test, track, its sine fit, t0, heave per frame)."""
+def _fitted_dwells(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit]):
+    """Each fitted dwell with a known input start: (test, track, its sine fit, t0)."""
     for test in campaign.sine_tests:
         fit, track = fits.get(test.label), tracks.get(test.label)
         t0 = None if track is None else input_start(test, track)
         if fit is not None and t0 is not None:
-            yield test, track, fit, t0, heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+            yield test, track, fit, t0
+
+
+def _dwell_heaves(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot):
+    """Each fitted dwell with a known input start: (test, track, its sine fit, t0, heave per frame)."""
+    for test, track, fit, t0 in _fitted_dwells(campaign, tracks, fits):
+        yield test, track, fit, t0, heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
 
 
 def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
@@ -127,14 +144,12 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
     """
     if pivot is None:
         return []
-    decay = model.params.get("natural_frequency_rad_s", 0.0) * model.params.get("damping_ratio", 0.0)
-    settle = (model.dead_time_s or 0.0) + (4.0 / decay if decay > 0 and math.isfinite(decay) else 0.3)
+    settle = (model.dead_time_s or 0.0) + _four_time_constants_s(model, 0.3)
     found = []
     for test, track, _, t0, heave in _dwell_heaves(campaign, tracks, fits, pivot):
-        before = heave[(track.angle_time_s < t0) & np.isfinite(heave)]
-        noise = float(np.std(np.diff(before)) / math.sqrt(2.0)) if before.size > 5 else None
-        for mode in fit_damped_modes(track.angle_time_s, heave, t0 + settle, noise=noise, source="dwells",
-                                     forced_hz=test.frequency_hz, max_modes=max(1, len(known or []))):
+        for mode in fit_damped_modes(track.angle_time_s, heave, t0 + settle, noise=_noise_before(track, heave, t0),
+                                     source="dwells", forced_hz=test.frequency_hz,
+                                     max_modes=max(1, len(known or []))):
             if abs(test.frequency_hz / mode.frequency_hz - 1.0) >= 3.0 * mode.damping_ratio + 0.02:
                 found.append(mode)
     groups: list[list[ModeFit]] = []
@@ -197,10 +212,8 @@ def bending_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[st
     (its error says which).
     """
     rows = []
-    for test in campaign.sine_tests:
-        fit, track = fits.get(test.label), tracks.get(test.label)
-        t0 = None if track is None else input_start(test, track)
-        if fit is None or t0 is None or track.bending_px is None:
+    for test, track, fit, t0 in _fitted_dwells(campaign, tracks, fits):
+        if track.bending_px is None:
             continue
         names = marker_names(len(track.extra_colours))
         for k, colour in enumerate(track.extra_colours):

@@ -268,9 +268,9 @@ def _with_extras(path: Path, settings: TrackerSettings, track: Track) -> Track:
     fit = rigid_motion(points, sig, valid, fit_markers=2)
     # A wrong blob in a frame (an extra marker's colour met elsewhere) leaves it off the rigid motion.
     resid = np.hypot(fit.bending_px, fit.along_px)
-    spread = 1.4826 * np.nanmedian(np.abs(resid - np.nanmedian(resid, axis=0)), axis=0)
-    jumped = np.any(resid > np.maximum(EXTRA_JUMP_MIN_PX, np.nanmedian(resid, axis=0) + EXTRA_JUMP_SPREADS * spread),
-                    axis=1)
+    centre = np.nanmedian(resid, axis=0)
+    spread = 1.4826 * np.nanmedian(np.abs(resid - centre), axis=0)
+    jumped = np.any(resid > np.maximum(EXTRA_JUMP_MIN_PX, centre + EXTRA_JUMP_SPREADS * spread), axis=1)
     if jumped.any():
         for i in np.flatnonzero(jumped):
             valid[i] = False

@@ -194,7 +194,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     roll = preset.roll_rad * np.sin(2.0 * np.pi * preset.roll_hz * time_s)
     rock = preset.rock_rad * np.sin(2.0 * np.pi * preset.rock_hz * time_s)
     per_mode = mode_heaves_px(preset, signal, time_s)
-    heave = per_mode.sum(axis=0) if len(per_mode) else np.zeros(time_s.size)
+    heave = per_mode.sum(axis=0)  # zeros for a rigid blade (no modes)
     # What the renderer moves each frame by: the heave (one mode), or each mode's (two).
     frame_heave = (lambda i: float(heave[i])) if len(per_mode) <= 1 else (lambda i: tuple(per_mode[:, i]))
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
@@ -304,12 +304,6 @@ def mode_heaves_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarr
         q = control.forced_response(control.tf([-k, 0.0, 0.0], [1.0, 2.0 * z * w, w * w]), fine, pitch - pitch[0])
         out.append(np.interp(time_s, fine, np.asarray(q.outputs, dtype=float)))
     return np.array(out)
-
-
-def blade_heave_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
-    """The blade's heave (px, up positive) at each frame: the sum of its modes' (:func:`mode_heaves_px`)."""
-    per_mode = mode_heaves_px(preset, signal, time_s)
-    return per_mode.sum(axis=0) if len(per_mode) else np.zeros(time_s.size)
 
 
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:

@@ -237,7 +237,6 @@ class CampaignPreset:
 
     def __post_init__(self) -> None:
         self._check_camera_options()
-        object.__setattr__(self, "extra_stickers", tuple((str(c), float(f)) for c, f in self.extra_stickers))
         freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):
             raise ServoscopeError("frequencies_hz must be positive")
