@@ -134,6 +134,12 @@ def cli() -> None:
 @click.option("--frames", "frames_format", type=click.Choice(["tiff16"]),
               help="Write each test as a folder of frames instead of a video (tiff16: 16-bit RGB TIFFs, as "
                    "high-speed cameras save); campaign.toml then gives frames and fps.")
+@click.option("--view-yaw", "view_yaw_deg", type=float,
+              help="An oblique camera: turned about the blade plane's vertical axis, degrees, under 80 "
+                   "(positive: to the blade's right; preset's: 0, square-on). Writes board.png too.")
+@click.option("--view-tilt", "view_tilt_deg", type=float,
+              help="Then turned about its horizontal axis, degrees, under 80 (positive: up, looking down; "
+                   "preset's: 0).")
 def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: int | None, fps: float | None,
              exposure_s: float | None, readout_s: float | None, gop: int | None, **camera_options) -> None:
     """Render a campaign with a known answer (the digital twin) into OUTDIR.
@@ -214,10 +220,17 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
 @click.option("--extra", "extra", metavar="COLOUR", multiple=True,
               help="Another sticker on the blade (repeat for more), each its own colour: the track gets each "
                    "marker's bending across the lead–trail line.")
+@click.option("--plane", "plane_json", type=click.Path(dir_okay=False, path_type=Path),
+              help="plane.json (servoscope plane): angles, separation, heave and bending measured in the blade's "
+                   "plane, true for a camera that is not square-on.")
+@click.option("--self-calibrate-plane", is_flag=True,
+              help="Without a plane: correct the angles for the camera's view as the markers' separation tells it "
+                   "(the foreshortening, not the perspective); refused where the blade turns too little to tell.")
 @_frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
           readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
-          reference: str | None, extra: tuple[str, ...], **source) -> None:
+          reference: str | None, extra: tuple[str, ...], plane_json: Path | None, self_calibrate_plane: bool,
+          **source) -> None:
     """Track the two markers through VIDEO and write the per-frame angles.
 
     VIDEO is a video file, a folder or quoted glob of TIFF/PNG/JPEG frames
@@ -228,6 +241,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
     from .markers.selection import parse_marker_spec
+    from .cli_plane import load_plane_option, track_in_view
 
     lead, lead_near = parse_marker_spec(lead, what="--lead")
     trail, trail_near = parse_marker_spec(trail, what="--trail")
@@ -247,6 +261,10 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
                 raise ServoscopeError("--reference: give the airframe stickers' colours, not auto")
         reference_pair = (parts[0], parts[1])
     camera = CameraModel.load(calibration) if calibration else None
+    plane = load_plane_option(plane_json, self_calibrate_plane)
+    if self_calibrate_plane and overlay is not None:
+        raise ServoscopeError("--overlay with --self-calibrate-plane: the corrected positions are not the picture's; "
+                              "draw the overlay from a track without the correction")
     if exposure_s is not None and not exposure_s > 0:
         raise ServoscopeError(f"{video}: --exposure must be > 0 (s), got {exposure_s}; leave it out when not known")
     if not (math.isfinite(readout_s) and readout_s >= 0):
@@ -256,8 +274,9 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
                                lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
-                               reference=reference_pair, extra=tuple(extra))
+                               reference=reference_pair, extra=tuple(extra), plane=plane)
     result = track_video(video, settings)
+    result = track_in_view(name, result, self_calibrate_plane)
     from .video.reader import probe_video
 
     note = probe_video(video).conversion_note()
@@ -295,7 +314,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         from .video.overlay import write_overlay
 
         overlay.parent.mkdir(parents=True, exist_ok=True)
-        write_overlay(video, result, overlay, camera=camera)
+        write_overlay(video, result, overlay, camera=camera, plane=plane)
         click.echo(f"wrote {overlay}")
 
 
@@ -433,9 +452,12 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
                                                 "saturation"]), default="none", show_default=True,
               help="Also fit models to the dwells' and the step's whole traces: linear, one nonlinear structure beside "
                    "it, or auto (every structure, selected by BIC). none: the frequency-domain fit alone.")
+@click.option("--self-calibrate-plane", is_flag=True,
+              help="Without [camera] plane: correct the angles for the camera's view as the markers' separation tells "
+                   "it (the foreshortening, not the perspective), the gain's interval widened by its uncertainty.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
              workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
-             bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str) -> None:
+             bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str, self_calibrate_plane: bool) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
@@ -457,6 +479,9 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     check_nonlinear(manifest, nonlinear, order, *held, {**manifest.model_ties, **ties})
     fr_fix, fr_bounds, _, _ = split_held(*held)
     check_held(order, "minimum_phase", fr_fix, fr_bounds)
+    if self_calibrate_plane and manifest.plane is not None:
+        raise ServoscopeError(f"{campaign}: [camera] plane is given: --self-calibrate-plane is for footage without a "
+                              "plane; leave one of them out")
     _check_out_dir(out_dir, manifest)
     failures: dict[str, str] = {}
     with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
@@ -467,7 +492,8 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if failures:
         manifest = manifest.without(failures)
     result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
-                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear, ties=ties or None)
+                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear, ties=ties or None,
+                          self_calibrate_plane=self_calibrate_plane)
     paths = write_report(result, out_dir)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
@@ -544,6 +570,26 @@ def calibrate(inputs: tuple[Path, ...], board: str, square_size: float, out_json
     out_json.parent.mkdir(parents=True, exist_ok=True)
     result.save(out_json)
     click.echo(f"{len(result.views_used)} views used, RMS reprojection error {result.rms_reprojection_error_px:.3f} px; wrote {out_json}")
+    for name, reason in result.skipped:
+        click.echo(f"skipped {name}: {reason}", err=True)
+
+
+@cli.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--board", required=True, help="Inner corners of the chessboard, COLSxROWS, e.g. 9x6.")
+@click.option("--square", "square_mm", required=True, type=float, help="Side of one square, mm.")
+@click.option("--calibration", type=click.Path(dir_okay=False, path_type=Path), help="camera.json: corners undistorted, view angle from the board's pose.")
+@click.option("--out", "out_json", required=True, type=click.Path(dir_okay=False, path_type=Path), help="plane.json to write.")
+def plane(inputs: tuple[Path, ...], board: str, square_mm: float, calibration: Path | None, out_json: Path) -> None:
+    """Calibrate the blade's plane from photos or videos of a chessboard held flat against it (INPUTS)."""
+    from .camera.model import CameraModel
+    from .camera.plane import calibrate_plane
+
+    camera = None if calibration is None else CameraModel.load(calibration)
+    result = calibrate_plane(list(inputs), board, square_mm=square_mm, camera=camera)
+    out_json.parent.mkdir(parents=True, exist_ok=True)
+    result.save(out_json)
+    click.echo("\n".join([*result.describe(), f"wrote {out_json}"]))
     for name, reason in result.skipped:
         click.echo(f"skipped {name}: {reason}", err=True)
 

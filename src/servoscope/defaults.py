@@ -45,3 +45,11 @@ JACKKNIFE_WIDENING_WARNING = 2.0
 #: step's metrics are noise, the analysis says "no discernible step response" and identify
 #: leaves the step out (StepAnalysis.output_moved).
 STEP_DISCERNIBLE_SIGMA = 10.0
+
+# -- camera: a view that is not square-on --------------------------------------------------------
+#: The markers' separation says the camera looks at the blade this many degrees off square or
+#: more (its 95 % interval starting above :data:`OBLIQUE_VIEW_LOWER_DEG`): ``track``, ``identify``
+#: and the report warn that angles read small or large and name ``servoscope plane``. A square-on
+#: twin's estimate stays within 2° (its interval holding 0); 8° off square is a 1 % gain error.
+OBLIQUE_VIEW_WARNING_DEG = 8.0
+OBLIQUE_VIEW_LOWER_DEG = 3.0

@@ -242,8 +242,8 @@ def calibrate(
         raise ServoscopeError(f"max_video_frames {max_video_frames!r}: must be a positive integer")
     board = (cols, rows)
 
-    files = _expand(paths)
-    names = _view_names(files)
+    files = expand_inputs(paths)
+    names = view_names(files)
 
     views: list[tuple[str, np.ndarray]] = []  # (name, refined corners (n, 1, 2) float32)
     skipped: list[tuple[str, str]] = []
@@ -263,23 +263,23 @@ def calibrate(
             )
 
     for path, name in zip(files, names):
-        if _is_image(path):
-            gray = _read_image(path)
+        if is_image(path):
+            gray = read_gray_image(path)
             check_size(path, gray.shape)
-            corners = _detect(gray, board, fast=False)
+            corners = detect_corners(gray, board, fast=False)
             if corners is None:
                 skipped.append((name, no_board))
             else:
-                views.append((name, _refine(gray, corners, board)))
+                views.append((name, refine_corners(gray, corners, board)))
         else:
             found: list[tuple[int, np.ndarray]] = []
-            for index, gray in _video_candidates(path, 4 * max_video_frames):
+            for index, gray in video_candidates(path, 4 * max_video_frames):
                 check_size(path, gray.shape)
-                corners = _detect(gray, board, fast=True)
+                corners = detect_corners(gray, board, fast=True)
                 if corners is None:
                     skipped.append((f"{name}#frame={index}", no_board))
                 else:
-                    found.append((index, _refine(gray, corners, board)))
+                    found.append((index, refine_corners(gray, corners, board)))
             if found:
                 assert size is not None
                 desc = np.array([_layout_descriptor(c, board, size) for _, c in found])
@@ -326,9 +326,11 @@ def calibrate(
 
 
 # -- inputs -------------------------------------------------------------------
+# Public (not in __all__) because camera/plane.py reads its inputs and finds its
+# corners exactly as calibration does: one reading, one detector, one refinement.
 
 
-def _expand(paths: str | Path | Iterable[str | Path]) -> list[Path]:
+def expand_inputs(paths: str | Path | Iterable[str | Path]) -> list[Path]:
     """Paths as given, folders replaced by their image/video files; duplicates dropped."""
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -356,7 +358,7 @@ def _expand(paths: str | Path | Iterable[str | Path]) -> list[Path]:
     return out
 
 
-def _view_names(files: Sequence[Path]) -> list[str]:
+def view_names(files: Sequence[Path]) -> list[str]:
     """File names, or the full paths given when two files share a name."""
     counts: dict[str, int] = {}
     for f in files:
@@ -364,12 +366,12 @@ def _view_names(files: Sequence[Path]) -> list[str]:
     return [f.name if counts[f.name] == 1 else str(f) for f in files]
 
 
-def _is_image(path: Path) -> bool:
+def is_image(path: Path) -> bool:
     """Whether ``path`` is to be read as a still image (OpenCV knows its signature or name)."""
     return path.suffix.lower() in IMAGE_SUFFIXES or cv2.haveImageReader(str(path))
 
 
-def _read_image(path: Path) -> np.ndarray:
+def read_gray_image(path: Path) -> np.ndarray:
     """Grayscale uint8 image, shape (height, width)."""
     if path.stat().st_size == 0:
         raise ServoscopeError(f"{path}: empty file, not an image")
@@ -379,7 +381,7 @@ def _read_image(path: Path) -> np.ndarray:
     return gray
 
 
-def _video_candidates(path: Path, n_candidates: int) -> Iterator[tuple[int, np.ndarray]]:
+def video_candidates(path: Path, n_candidates: int) -> Iterator[tuple[int, np.ndarray]]:
     """Yield ``(frame index, grayscale frame)`` for frames spread evenly through a video.
 
     Frame indices count decoded frames from 0. The number of frames is taken
@@ -427,7 +429,7 @@ def _video_candidates(path: Path, n_candidates: int) -> Iterator[tuple[int, np.n
 # -- detection ----------------------------------------------------------------
 
 
-def _detect(gray: np.ndarray, board: tuple[int, int], *, fast: bool) -> np.ndarray | None:
+def detect_corners(gray: np.ndarray, board: tuple[int, int], *, fast: bool) -> np.ndarray | None:
     """Chessboard inner corners, shape (n, 1, 2) float32, or None.
 
     The classic detector first (``fast`` adds ``CALIB_CB_FAST_CHECK``, which
@@ -452,7 +454,7 @@ def _min_spacing_px(corners: np.ndarray, board: tuple[int, int]) -> float:
     return float(min(along.min(), across.min()))
 
 
-def _refine(gray: np.ndarray, corners: np.ndarray, board: tuple[int, int]) -> np.ndarray:
+def refine_corners(gray: np.ndarray, corners: np.ndarray, board: tuple[int, int]) -> np.ndarray:
     """Sub-pixel corners (cornerSubPix), half-window 0.3 × smallest spacing, 2–15 px."""
     half = int(np.clip(math.floor(0.3 * _min_spacing_px(corners, board)), 2, 15))
     return cv2.cornerSubPix(gray, corners.copy(), (half, half), (-1, -1), _SUBPIX_CRITERIA)

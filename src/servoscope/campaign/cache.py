@@ -133,6 +133,8 @@ def _code_identity() -> dict:
         root / "video" / "reader.py",
         *(root / "video" / f"{name}.py" for name in ("planes", "frame_source", "sources", "sequence", "highspeed")),
         root / "camera" / "model.py",
+        root / "camera" / "plane.py",
+        root / "camera" / "plane_map.py",
     ]
     h = hashlib.blake2b(digest_size=16)
     for path in files:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..camera.model import CameraModel
+from ..camera.plane import Plane
 from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
 from ..markers.selection import check_near
@@ -28,7 +29,7 @@ __all__ = ["TestSpec", "Campaign", "load_campaign"]
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, not interpreted here.
 _TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model"}
 _MODEL_KEYS = {"fix", "bound", "tie"}
-_CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp"}
+_CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp", "plane"}
 _MARKER_KEYS = {"lead", "trail", "led", "reference", "extra"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
@@ -104,6 +105,9 @@ class Campaign:
     model_ties : dict of name → expression
         Parameters computed from others in the time-domain fits (``[model] tie =
         {rate_limit_rad_s = "4*gain"}``).
+    plane : Plane or None
+        The blade's plane (``[camera] plane = "plane.json"``, from ``servoscope plane``):
+        angles are measured in it; None: in the image.
     """
 
     path: Path
@@ -125,6 +129,7 @@ class Campaign:
     model_fix: dict[str, float] = field(default_factory=dict)
     model_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     model_ties: dict[str, str] = field(default_factory=dict)
+    plane: Plane | None = None
 
     def held_parameters(self, fix: dict[str, float] | None = None,
                         bounds: dict[str, tuple[float, float]] | None = None
@@ -269,6 +274,16 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
                 camera = CameraModel.load(base / camera_t["calibration"])
             except ServoscopeError as exc:
                 problems.add("camera.calibration", str(exc))
+    plane = None
+    if "plane" in camera_t:
+        # The blade's plane from a board photo (servoscope plane): angles measured in it.
+        if not isinstance(camera_t["plane"], str):
+            problems.add("camera.plane", "must be a file name (plane.json, from `servoscope plane`)")
+        else:
+            try:
+                plane = Plane.load(base / camera_t["plane"])
+            except ServoscopeError as exc:
+                problems.add("camera.plane", str(exc))
     exposure = None
     if "exposure_s" in camera_t:
         exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)
@@ -525,4 +540,5 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         model_fix=model_fix,
         model_bounds=model_bounds,
         model_ties=model_ties,
+        plane=plane,
     )

@@ -16,6 +16,7 @@ import numpy as np
 
 from .._io import atomic_path, write_json_atomic
 from ..angle.pivot import pivot_motion
+from ..angle.view import ObliqueView
 from ..camera.exposure import ExposureEstimate
 from ..markers.track import Track
 from ..results import jsonable
@@ -149,6 +150,15 @@ class IdentificationResult:
     heave_model : HeaveModel or None
         The flapping frequency response fitted (heave over pitch as a mode,
         :func:`servoscope.campaign.blade.heave_model`); its mode is also in ``modes``.
+    view : ObliqueView or None
+        The camera's view of the blade's plane as the markers' separation tells it
+        (:func:`servoscope.campaign.plane_check.pooled_view`): of the image's positions
+        without a plane, of the plane's with one (a check of the plane); None with too
+        few frames.
+    plane : dict or None
+        The plane the angles were measured in (its summary: file, view angle, reprojection
+        error, angle-gain uncertainty), ``{"source": "self-calibrated (affine)", …}`` after
+        ``self_calibrate_plane``; None: the image.
     """
 
     campaign: Campaign
@@ -168,6 +178,8 @@ class IdentificationResult:
     heave_response: list = field(default_factory=list)
     bending_response: list = field(default_factory=list)
     heave_model: HeaveModel | None = None
+    view: ObliqueView | None = None
+    plane: dict | None = None
 
     @property
     def transfer_function(self):
@@ -268,6 +280,8 @@ class IdentificationResult:
                 **({"bending_response": [r.summary() for r in self.bending_response]}
                    if self.bending_response else {}),
                 **({"heave_model": self.heave_model.summary()} if self.heave_model is not None else {}),
+                **({"view": self.view.summary()} if self.view is not None else {}),
+                **({"plane": self.plane} if self.plane is not None else {}),
                 **({"extra_markers": list(self.campaign.extra)} if self.campaign.extra else {}),
                 "frequency_response": self.frequency_response.summary(),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
@@ -450,7 +464,9 @@ class IdentificationResult:
                    predicted if selection is None else None,
                    [HeaveRow.from_summary(r) for r in data.get("heave_response", [])],
                    [HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
-                   None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]))
+                   None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]),
+                   None if data.get("view") is None else ObliqueView.from_summary(data["view"]),
+                   data.get("plane"))
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

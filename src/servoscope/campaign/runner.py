@@ -26,11 +26,13 @@ from ..sysid import (
     fit_transfer_function,
     gain_against_amplitude,
     rigid_motion_null,
+    with_gain_scale_uncertainty,
 )
 from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
                     step_ringdown_warning)
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
+from .plane_check import campaign_in_view, plane_summary
 from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
 
 __all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
@@ -51,6 +53,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         timestamp=campaign.timestamp,
         reference=campaign.reference,
         extra=campaign.extra,
+        plane=campaign.plane,
     )
 
 
@@ -306,6 +309,7 @@ def identify(
     bounds: dict[str, tuple[float, float]] | None = None,
     nonlinear: str = "none",
     ties: dict[str, str] | None = None,
+    self_calibrate_plane: bool = False,
     **track_options,
 ) -> IdentificationResult:
     """Identify a campaign: tracks → sine fits → frequency response → model → step check.
@@ -340,6 +344,11 @@ def identify(
     ties : dict of name → expression, optional
         Parameters computed from others in the time-domain fits (with the manifest's
         ``[model] tie``), e.g. ``{"rate_limit_rad_s": "4*gain"}``.
+    self_calibrate_plane : bool
+        Without a plane (``[camera] plane``): correct every track for the camera's view as the
+        markers' separation tells it (:func:`~servoscope.campaign.plane_check.with_view_correction`:
+        the foreshortening, not the perspective), the gain's interval widened by the estimate's
+        uncertainty. Refused where the footage does not tell the view.
     **track_options
         Passed to :func:`track_campaign` when ``tracks`` is not given
         (``workers``, ``scheduler``, ``cache_dir``, ``force``, ``on_done``).
@@ -370,6 +379,7 @@ def identify(
         if failures:
             campaign = campaign.without(failures)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
+    tracks, view, scale_error = campaign_in_view(campaign, tracks, self_calibrate_plane, warnings)
     exposure = campaign_exposure(campaign, tracks)
     shared_t0_s, own_t0_stderr = shared_t0_stderr(campaign.sine_tests, tracks)
     led_warning = led_coverage_warning(campaign, tracks)
@@ -443,6 +453,8 @@ def identify(
     fr_fix, fr_bounds, _, _ = split_held(held_fix, held_bounds)
     model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=fr_fix or None,
                                   bounds=fr_bounds or None)
+    if scale_error is not None:
+        model = with_gain_scale_uncertainty(model, *scale_error)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
 
@@ -546,4 +558,5 @@ def identify(
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)
     return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks, modes, selection, predicted, heave, bending, flapping)
+                                amplitude_checks, modes, selection, predicted, heave, bending, flapping, view,
+                                plane_summary(campaign, tracks))

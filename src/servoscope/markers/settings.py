@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..camera.model import CameraModel
+from ..camera.plane import Plane
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from .colour import BRIGHTNESS, parse_colour
@@ -103,6 +104,13 @@ class TrackerSettings:
         bending (see :func:`servoscope.angle.rigid_motion`). Tracked two at a
         time by passes of their own over the video. Empty (the default): two
         markers, tracked as always.
+    plane : Plane or None
+        The blade's plane (``servoscope plane``'s plane.json): every centroid, undistorted
+        first, is mapped into the plane (:meth:`~servoscope.camera.plane.Plane.to_rectified`:
+        pixels of a square-on view at the picture's own scale) and the angle, the separation,
+        the heave and the bending are measured there, so that a camera that is not square-on
+        reads true angles. The plane's own calibration undistorts the centroids when
+        ``camera`` is None; a different ``camera`` is refused. None: angles in the image.
     """
 
     lead: str = LEAD_COLOUR
@@ -123,6 +131,7 @@ class TrackerSettings:
     trail_near: tuple[float, float] | None = None
     reference: tuple[str, str] | None = None
     extra: tuple[str, ...] = ()
+    plane: Plane | None = None
 
 
 ENGINES = ("auto", "numba", "numpy", "reference-rgb")

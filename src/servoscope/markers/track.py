@@ -24,7 +24,10 @@ class Track:
 
     Arrays have one entry per decoded frame. Coordinates are pixels in the
     ideal (undistorted) image when a camera model was given, else in the
-    recorded image.
+    recorded image; with a plane (``TrackerSettings.plane``), the plane's
+    rectified pixels (:meth:`~servoscope.camera.plane.Plane.to_rectified`:
+    ``plane_mm_per_px`` mm each), the areas and shapes staying the recorded
+    image's.
 
     Attributes
     ----------
@@ -98,6 +101,11 @@ class Track:
         median over the track; px, up positive; see
         :func:`servoscope.angle.rigid_motion`); NaN where invalid. The lead's
         and trail's are 0: they define the line.
+    plane : str or None
+        The plane the positions were measured in (its file's name), or how it was
+        found (``"self-calibrated (affine)"``); None: the image.
+    plane_mm_per_px : float or None
+        Millimetres in the plane per position pixel (None without a plane).
     """
 
     video: str
@@ -132,6 +140,8 @@ class Track:
     extra_xy_px: np.ndarray | None = None
     extra_sigma_px: np.ndarray | None = None
     bending_px: np.ndarray | None = None
+    plane: str | None = None
+    plane_mm_per_px: float | None = None
 
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
@@ -184,6 +194,11 @@ class Track:
             "valid_frames": self.n_valid,
             "valid_fraction": (self.n_valid / self.n_frames) if self.n_frames else 0.0,
             "mean_separation_px": analysis.get("separation_px"),
+            # In a plane: its name, and the separation in its millimetres.
+            **({} if self.plane is None else {
+                "plane": self.plane,
+                "mean_separation_mm": None if analysis.get("separation_px") is None or self.plane_mm_per_px is None
+                else float(analysis["separation_px"]) * float(self.plane_mm_per_px)}),
             "centroid_sigma_px": analysis.get("centroid_sigma_px"),
             "angle_noise_rad": analysis.get("angle_sigma_rad"),
             "angle_noise_measured_rad": analysis.get("measured_noise_rad"),
@@ -225,7 +240,16 @@ class Track:
             **({} if self.intra is None else {"intra": np.asarray(self.intra).astype(np.int64)}),
             **({} if self.reference_angle_rad is None else {"reference_angle_rad": self.reference_angle_rad}),
             **self._extra_columns(),
+            **self._plane_columns(),
         }
+
+    def _plane_columns(self) -> dict[str, np.ndarray]:
+        """The centroids in the plane's millimetres, when they were measured in a plane."""
+        if self.plane_mm_per_px is None:
+            return {}
+        k = float(self.plane_mm_per_px)
+        return {"lead_x_mm": k * self.lead_xy_px[:, 0], "lead_y_mm": k * self.lead_xy_px[:, 1],
+                "trail_x_mm": k * self.trail_xy_px[:, 0], "trail_y_mm": k * self.trail_xy_px[:, 1]}
 
     def _extra_columns(self) -> dict[str, np.ndarray]:
         """Extra markers' centroids (``extra1_x_px`` …) and every marker's bending, when there are extra markers."""
@@ -307,6 +331,7 @@ class Track:
             intra=None if "intra" not in cols else np.array([v == "1" for v in cols["intra"]], dtype=bool),
             reference_angle_rad=num("reference_angle_rad"),
             **_extra_from_columns(num, len(rows)),
+            plane_mm_per_px=_mm_per_px(num),
         )
 
     def to_csv(self, path: str | Path) -> None:
@@ -327,6 +352,15 @@ class Track:
             row.append(self.reason[i].replace(",", ";"))
             lines.append(",".join(row))
         Path(path).write_text("\n".join(lines) + "\n")
+
+
+def _mm_per_px(num) -> float | None:
+    """The plane's mm per px from a table's ``lead_x_mm`` beside ``lead_x_px`` (None without them)."""
+    mm, px = num("lead_x_mm"), num("lead_x_px")
+    if mm is None or px is None:
+        return None
+    ok = np.isfinite(mm) & np.isfinite(px) & (np.abs(px) > 1.0)
+    return float(np.median(mm[ok] / px[ok])) if ok.any() else None
 
 
 def _extra_from_columns(num, n_rows: int) -> dict:

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..angle.geometry import angle_rad_from_centroids, blade_angle
 from ..angle.rigid import rigid_motion
+from ..camera.plane_map import centroids_in_plane, plane_camera
 from ..camera.rolling_shutter import angle_sample_times, check_readout
 from ..camera.undistort import undistort_centroids
 from ..errors import ServoscopeError
@@ -85,6 +86,10 @@ def track_video(
         # keeps to it too, as the decoder does (see video.reader.thread_budget).
         cv2.setNumThreads(budget)
     info = probe_video(path)
+    if settings.plane is not None:
+        # Before any work: a plane of another camera, or of another size, is refused.
+        settings = replace(settings, camera=plane_camera(settings.plane, settings.camera, (info.width, info.height),
+                                                         path))
     _check_extra(settings)
     lead_spec = parse_colour(settings.lead, what="lead marker colour")
     trail_spec = parse_colour(settings.trail, what="trail marker colour")
@@ -339,6 +344,10 @@ def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str 
             for i in np.flatnonzero(outside):
                 valid[i] = False
                 reasons[i] = reasons[i] or f"{name} centroid outside the calibrated region"
+    if settings.plane is not None:
+        # Into the blade's plane: the rigid check, the angle and everything after it are the plane's.
+        lead_arr, lead_sigma = centroids_in_plane(settings.plane, lead_arr, lead_sigma)
+        trail_arr, trail_sigma = centroids_in_plane(settings.plane, trail_arr, trail_sigma)
     flag_nonrigid(path, lead_arr, trail_arr, valid, reasons, warnings)
     angle, angle_sigma = blade_angle(lead_arr, trail_arr, valid, lead_sigma, trail_sigma)
     # Angles and t0 on the exposures' middle clock (the LED and the stickers share each exposure).
@@ -391,6 +400,8 @@ def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str 
         led_partial_frames=start.partial_frames,
         lead_shape_px2=np.asarray(log.shape["lead"], dtype=np.float64).reshape(-1, 3),
         trail_shape_px2=np.asarray(log.shape["trail"], dtype=np.float64).reshape(-1, 3),
+        plane=None if settings.plane is None else (settings.plane.source or "plane.json"),
+        plane_mm_per_px=None if settings.plane is None else 1.0 / settings.plane.scale_px_per_mm,
     )
 
 

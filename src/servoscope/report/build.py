@@ -11,7 +11,9 @@ import numpy as np
 from .figures import (amplitude_figure, blade_frame_figure, bode_figure, candidate_traces_figure, describing_function_figure, dwell_figure,
                       heave_figure, overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
+from .plane_section import plane_section
 from .numbers import format_interval, format_value, format_with_uncertainty
+from ..camera.plane_map import recorded_points
 from ..sysid.model_text import PARAM_LABELS, model_equation
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -39,10 +41,8 @@ def _representative_dwell(result: "IdentificationResult") -> str:
 def _track_xy_recorded(result: "IdentificationResult", label: str, index: int) -> tuple[np.ndarray, np.ndarray]:
     """Centroids of one frame in the recorded (distorted) image, for drawing on it."""
     track = result.tracks[label]
-    lead, trail = track.lead_xy_px[index], track.trail_xy_px[index]
-    camera = result.campaign.camera
-    if camera is not None:
-        lead, trail = camera.distort_points(np.stack([lead, trail]))
+    lead, trail = recorded_points(np.stack([track.lead_xy_px[index], track.trail_xy_px[index]]),
+                                  result.campaign.camera, result.campaign.plane)
     return lead, trail
 
 
@@ -222,6 +222,9 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                "column is how much the other frames' amplitude differs (docs/accuracy.md, \"The codec check\").")
     sections.append(s)
 
+    view_section = plane_section(result, figures_dir)
+    if view_section is not None:
+        sections.append(view_section)
     if result.modes or result.heave_response or result.bending_response:
         sections.append(_blade_section(result, figures_dir))
     if result.servo_model is not None:
@@ -467,9 +470,8 @@ def _blade_frame(result: "IdentificationResult", modes):
     pts = np.concatenate([track.lead_xy_px[i][None], track.trail_xy_px[i][None], track.extra_xy_px[i]])
     if not np.all(np.isfinite(pts)):
         return None
-    camera = result.campaign.camera
-    if camera is not None and track.snapshot_rgb is not None:
-        pts = camera.distort_points(pts)
+    if track.snapshot_rgb is not None:
+        pts = recorded_points(pts, result.campaign.camera, result.campaign.plane)
     span = float(np.hypot(*(pts[0] - pts[1])))
     drawn = []
     for mode in modes:

@@ -2,7 +2,8 @@
 
 The footage has a known answer: ``truth.json`` records the model, the
 camera, and for every frame the blade pitch, the true sticker centres (ideal,
-undistorted pixel coordinates) and the LED level.
+undistorted pixel coordinates; in the blade's plane, plane px, when the camera
+looks at it obliquely) and the LED level.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import control
+import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
@@ -27,7 +29,8 @@ from ..defaults import REFERENCE_COLOURS
 from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
-from .._io import write_text_atomic
+from .._io import atomic_path, write_text_atomic
+from .board import PLANE_MM_PER_PX, render_board_photo
 
 #: A preset's default real-camera options, to tell which ones a campaign set.
 _DEFAULT = CampaignPreset(name="default", servo=None, frequencies_hz=(1.0,))
@@ -112,15 +115,18 @@ def _row_time_s(frame_time_s: np.ndarray, y_px: np.ndarray, preset: CampaignPres
 
 def _rolling_truth(preset: CampaignPreset, scene: Scene, camera, pitch_at, time_s: np.ndarray,
                    uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Time at which a rolling shutter sees a blade point, and where it is (ideal px) then.
+    """Time at which a rolling shutter sees a blade point, and where it is (ideal px; plane px under a view) then.
 
     The row depends on the pose and the pose on the row's time: two fixed-point
     passes from the frame-time pose (a point moves by < 0.1 px in the ~0.1 ms
     that its own motion shifts its row time).
     """
     when = time_s.copy()
+    view = preset.view()
     for _ in range(3):
         xy = scene.to_image(uv, pitch_at(when))
+        # The row is the recorded one: through the oblique view, then the lens.
+        xy = xy if view is None else view.apply(xy)
         recorded = camera.distort_points(xy) if camera.has_distortion else xy
         when = _row_time_s(time_s, recorded[:, 1], preset)
     return when, scene.to_image(uv, pitch_at(when))
@@ -171,7 +177,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     modes = blade_modes_of(preset)
     shapes = [_shape_along_chord(scene, bend) if bend else None for *_, bend in modes] or [None]
     renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed,
-                             mode_shape=shapes if len(shapes) > 1 else shapes[0])
+                             mode_shape=shapes if len(shapes) > 1 else shapes[0], view=preset.view())
     extra_xy = scene.to_image(scene.extra_centres_uv(), pitch) if scene.extra_stickers else None
     rolling: dict = {}
     if preset.readout_s > 0:
@@ -479,11 +485,30 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         rec = render_test(out / name, p, scene, signal, duration, noise_seed)
         tests.append({"video": name, **rec})
 
+    truth = _truth(p, seed, camera, fps, scene, tests)
+    if p.view() is not None:
+        truth["board"] = _write_board(out / "board.png", p, scene, camera, seed)
     camera.save(out / "camera.json")
-    write_text_atomic(out / "truth.json", json.dumps(_truth(p, seed, camera, fps, scene, tests), allow_nan=False) + "\n")
+    write_text_atomic(out / "truth.json", json.dumps(truth, allow_nan=False) + "\n")
     toml_path = out / "campaign.toml"
     write_text_atomic(toml_path, _campaign_toml(p, scene, tests, fps if p.frames_format is not None else None))
     return toml_path
+
+
+def _write_board(path: Path, p: CampaignPreset, scene: Scene, camera, seed: int) -> dict:
+    """Photograph a chessboard lying in the blade's plane through the campaign's view and lens; its truth.
+
+    Its noise comes from its own stream of the campaign seed (the tests' draws keep their values);
+    a monochrome camera's photo is the luma, in three equal channels.
+    """
+    board_seed = int(np.random.default_rng([seed, 0xB0A2D]).integers(0, 2**63 - 1))
+    image, board = render_board_photo(scene, p.view(), camera, noise_sigma_dn=p.noise_sigma_dn, seed=board_seed)
+    if p.monochrome:
+        image = np.repeat(np.rint(luma_bt601(image)).astype(np.uint8)[..., None], 3, axis=2)
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), np.ascontiguousarray(image[..., ::-1])):  # OpenCV writes BGR
+            raise ServoscopeError(f"could not write {path}")
+    return {"file": path.name, **board}
 
 
 def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, tests: list[dict]) -> dict:
@@ -514,9 +539,15 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                           "frames_format", "roll_rad", "roll_hz", "rock_rad", "rock_hz",
                                           "reference_stickers", "monochrome", "sine_amplitudes",
                                           "blade_mode_hz", "blade_mode_damping", "blade_mode_px_per_rad",
-                                          "blade_mode_bend", "blade_mode2", "bit_depth")
+                                          "blade_mode_bend", "blade_mode2", "bit_depth", "view_yaw_deg",
+                                          "view_tilt_deg")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
+        # An oblique camera: the homography from the plane, where truth's positions and angles are.
+        **({"view": {**p.view().to_dict(), "plane_mm_per_px": PLANE_MM_PER_PX,
+                     "coordinates": "lead_xy_px, trail_xy_px, extra_xy_px and angle_rad are in the blade's plane "
+                                    "(plane px); the recorded picture is homography_plane_to_image, then the lens"}}
+           if p.view() is not None else {}),
         "sticker_offset_rad": scene.sticker_offset_rad,
         **({"extra_stickers": [{"colour": c, "position": f} for c, f in scene.extra_stickers]}
            if scene.extra_stickers else {}),

@@ -14,6 +14,7 @@ from ..defaults import EXTRA_COLOURS
 from ..errors import ServoscopeError
 from .scene import REFERENCE_SIZE, Scene
 from .servo import ServoModel
+from .view import ObliqueView
 
 __all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "TIMESTAMP_AT", "get_preset"]
 
@@ -180,6 +181,14 @@ class CampaignPreset:
         manifest then says ``frames`` and ``fps``): ``"tiff16"``, 16-bit RGB
         TIFFs of the rendered 8-bit frames (``v · 257``), as high-speed
         cameras save; the codec is then unused.
+    view_yaw_deg, view_tilt_deg : float
+        An oblique camera (:class:`~servoscope.simulate.view.ObliqueView`): turned
+        about the blade plane's vertical axis (positive: to the blade's right) and
+        then its own horizontal one (positive: up), degrees, under 80 each, with the
+        lens's focal length (:meth:`camera`). The scene is drawn in the plane and
+        seen through the view; truth's positions and angles stay in the plane, and
+        the campaign gets a chessboard photo (``board.png``). 0 and 0 (the
+        default): square-on.
     """
 
     name: str
@@ -234,9 +243,12 @@ class CampaignPreset:
     blade_mode_bend: float = 0.0
     blade_mode2: tuple[float, float, float, float] | None = None
     extra_stickers: tuple[tuple[str, float], ...] = ()
+    view_yaw_deg: float = 0.0
+    view_tilt_deg: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_camera_options()
+        self.view()  # validates the angles (ServoscopeError)
         freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):
             raise ServoscopeError("frequencies_hz must be positive")
@@ -332,6 +344,13 @@ class CampaignPreset:
         cy = (self.height - 1) / 2.0 + self.principal_offset_px[1] * s
         k = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
         return CameraModel((self.width, self.height), k, np.asarray(self.dist_coeffs, dtype=float))
+
+    def view(self) -> ObliqueView | None:
+        """The oblique view, with the lens's focal length as :meth:`camera` scales it; None when square-on."""
+        if self.view_yaw_deg == 0 and self.view_tilt_deg == 0:
+            return None
+        s = min(self.width / REFERENCE_SIZE[0], self.height / REFERENCE_SIZE[1])
+        return ObliqueView(self.view_yaw_deg, self.view_tilt_deg, self.focal_px * s, self.width, self.height)
 
 
 PRESETS: dict[str, CampaignPreset] = {

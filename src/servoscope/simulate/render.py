@@ -3,7 +3,10 @@
 Every part of the scene (blade, stickers, LED, clutter) is drawn with its exact
 area coverage of each pixel (:mod:`servoscope.simulate.coverage`), moved as the
 camera shakes or rolls and the airframe rocks (:func:`picture_motion`,
-:func:`airframe_motion`).
+:func:`airframe_motion`). A camera that looks at the blade's plane from the side
+(:class:`~servoscope.simulate.view.ObliqueView`) maps every outline by its
+homography; the maps act in the order airframe rocking (in the plane) → view →
+lens → picture motion (in the recorded picture).
 
 Sensor noise uses a splitmix64 stream (in numba) whose state is drawn per
 frame from a numpy ``SeedSequence([noise_seed, frame_index])``, mapped through
@@ -32,6 +35,7 @@ from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from .coverage import accumulated, composite, composite_rows, polygon_coverage, signed_area
 from .scene import Scene, colour_rgb
+from .view import ObliqueView, densify_closed
 
 __all__ = ["polygon_coverage", "FrameRenderer", "render_frame"]
 
@@ -135,18 +139,33 @@ def airframe_motion(scene: Scene, rock_rad: float) -> np.ndarray:
     return np.array([[c, s, cx - c * cx - s * cy], [-s, c, cy + s * cx - c * cy]])
 
 
+@functools.lru_cache(maxsize=4)
+def _viewed_background(scene: Scene, view: ObliqueView) -> np.ndarray:
+    # The plain background (no clutter) as the oblique camera sees it, once per scene and view.
+    # It is smooth (blotches tenths of the picture wide): a cubic warp by the homography alone
+    # draws it to ~1e-3 DN; the lens's bending of it would not show.
+    plain = np.ascontiguousarray(scene.background())
+    bg = cv2.warpPerspective(plain, view.homography, (scene.width, scene.height), flags=cv2.INTER_CUBIC,
+                             borderMode=cv2.BORDER_REFLECT)
+    bg.flags.writeable = False
+    return bg
+
+
 def _moved(xy: np.ndarray, motion: np.ndarray | None, airframe: np.ndarray | None = None) -> np.ndarray:
     if airframe is not None:
         xy = xy @ airframe[:, :2].T + airframe[:, 2]
     return xy if motion is None else xy @ motion[:, :2].T + motion[:, 2]
 
 
-def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, airframe=None) -> None:
+def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, airframe=None, place=None) -> None:
     """Composite the scene's clutter, moved by the picture's ``motion`` (2×3; the airframe's items first by
-    ``airframe``, a map of recorded points), into ``image`` (float32 RGB)."""
+    ``airframe``, a map of recorded points), into ``image`` (float32 RGB). ``place(xy, on_airframe)``, when
+    given, replaces ``airframe``: where an oblique camera records each item (its rocking included)."""
     for item in scene.clutter:
         xy = item.outline_px()
-        if item.airframe and airframe is not None:
+        if place is not None:
+            xy = place(xy, item.airframe)
+        elif item.airframe and airframe is not None:
             xy = airframe(xy)
         xy = _moved(xy, motion)
         acc, x0, y0, sign = accumulated(xy, scene.width, scene.height)
@@ -188,22 +207,35 @@ class FrameRenderer:
         share. None: 1 everywhere (the whole blade heaves). A sequence: one
         shape per mode (None for a rigid one), each frame's ``heave_px`` then one
         value per mode.
+    view : ObliqueView, optional
+        A camera that looks at the blade's plane from the side: the scene's
+        coordinates are then plane px, and every outline (blade, stickers,
+        LED, clutter) is mapped by the view's homography before the lens; the
+        plain background is warped by it once. Its picture size must be the
+        scene's. None or a square-on view: the square-on camera (the same
+        code path, the same bytes).
     """
 
     def __init__(self, scene: Scene, camera: CameraModel | None = None, *,
                  noise_sigma_dn: float = 1.5, noise_seed: int = 0,
                  mode_shape: Callable[[np.ndarray], np.ndarray] | None
-                 | Sequence[Callable[[np.ndarray], np.ndarray] | None] = None) -> None:
+                 | Sequence[Callable[[np.ndarray], np.ndarray] | None] = None,
+                 view: ObliqueView | None = None) -> None:
         if camera is not None and tuple(camera.image_size) != (scene.width, scene.height):
             raise ServoscopeError(
                 f"camera image size {camera.image_size} differs from the scene's {(scene.width, scene.height)}")
+        if view is not None and (view.width, view.height) != (scene.width, scene.height):
+            raise ServoscopeError(f"view picture size {(view.width, view.height)} differs from the scene's "
+                                  f"{(scene.width, scene.height)}")
         if not noise_sigma_dn >= 0:
             raise ServoscopeError("noise_sigma_dn must be >= 0")
         self.scene = scene
         self.camera = camera if camera is not None and camera.has_distortion else None
         self.noise_sigma_dn = float(noise_sigma_dn)
         self.noise_seed = int(noise_seed)
-        self._bg = _background(scene)
+        # A square-on view is the identity: dropped, so that the square-on code path draws it.
+        self.view = view if view is not None and not view.is_square_on else None
+        self._bg = _background(scene) if self.view is None else self._viewed_static()
         self._work = self._bg.copy()
         self._dirty: list[tuple[int, int, int, int]] = []
         # Noise values pre-scaled to DN; float32 keeps the table in L2 cache.
@@ -237,6 +269,31 @@ class FrameRenderer:
         self._led_on = colour_rgb(scene.led_colour)
         self._led_off = colour_rgb(scene.led_off_colour)
 
+    def _viewed_static(self) -> np.ndarray:
+        """The oblique camera's static picture: the warped plain background and the clutter drawn on it."""
+        bg = _viewed_background(replace(self.scene, clutter=()), self.view).copy()
+        _draw_clutter(bg, self.scene, None, place=self._clutter_place(None))
+        bg.flags.writeable = False
+        return bg
+
+    def _clutter_place(self, airframe: np.ndarray | None):
+        """Where the oblique camera records a clutter item given in the square-on recorded picture.
+
+        The square-on picture's points go back through the lens to the plane (its ideal image),
+        the airframe's items rock there, then the view and the lens map them to this picture.
+        The lens bends straight edges: outlines are densified first.
+        """
+        camera, view, step = self.camera, self.view, self.scene.max_segment_px
+
+        def place(xy: np.ndarray, on_airframe: bool) -> np.ndarray:
+            if camera is not None:
+                xy = camera.undistort_points(densify_closed(xy, step))[0]
+            if on_airframe and airframe is not None:
+                xy = _moved(xy, None, airframe)
+            xy = view.apply(xy)
+            return xy if camera is None else camera.distort_points(xy)
+        return place
+
     def _share_of(self, shape, centres) -> np.ndarray | None:
         if shape is None:
             return None
@@ -266,6 +323,8 @@ class FrameRenderer:
             for qj, share in zip(q, self._heave_share):
                 uv[:, 1] += qj if share is None else qj * share
         xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
+        if self.view is not None:
+            xy = self.view.apply(xy)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)
         return np.split(xy, self._splits)
@@ -292,13 +351,17 @@ class FrameRenderer:
             # wide): cubic interpolation moves it to ~1e-3 DN. Clutter has
             # sharp edges, which interpolation would not move exactly: it is
             # drawn again, moved, with exact coverage.
-            plain = _background(replace(self.scene, clutter=()))
+            bare = replace(self.scene, clutter=())
+            plain = _background(bare) if self.view is None else _viewed_background(bare, self.view)
             if motion is None:
                 self._work[:] = plain
             else:
                 self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), motion, (w, h), flags=cv2.INTER_CUBIC,
                                                borderMode=cv2.BORDER_REFLECT)
-            _draw_clutter(self._work, self.scene, motion, self._airframe_map(airframe))
+            if self.view is None:
+                _draw_clutter(self._work, self.scene, motion, self._airframe_map(airframe))
+            else:
+                _draw_clutter(self._work, self.scene, motion, place=self._clutter_place(airframe))
             self._work *= g
         self._dirty = [(0, h, 0, w)]
 
@@ -422,6 +485,8 @@ class FrameRenderer:
                 continue
             rows = np.arange(y0, y1 + 1)
             xy = self.scene.to_image(uv, pitch[rows])
+            if self.view is not None:
+                xy = self.view.apply(xy)
             if self.camera is not None:
                 xy = _distort(self.camera, xy.reshape(-1, 2)).reshape(xy.shape)
             xs = np.ascontiguousarray(xy[..., 0])
@@ -455,6 +520,21 @@ class FrameRenderer:
         ndarray of uint8, shape (height, width, 3)
         """
         return self._finished(self.composite_rolling(row_pitch_rad, row_led_level, row_lamp_gain), frame_index)
+
+    def static_picture(self) -> np.ndarray:
+        """The recorded static picture (background and clutter, through the view), float32 DN, a copy."""
+        return self._bg.copy()
+
+    def add_noise(self, clean: np.ndarray, frame_index: int = 0) -> np.ndarray:
+        """``clean`` (float32 DN, the frame's shape) with frame ``frame_index``'s seeded sensor noise, as uint8.
+
+        The frames' noise model and seeds (:meth:`render`): for pictures composed outside the
+        renderer, such as the twin's board photo.
+        """
+        work = np.ascontiguousarray(clean, dtype=np.float32)
+        if work.shape != self._bg.shape:
+            raise ServoscopeError(f"add_noise: need a {self._bg.shape} picture, not {work.shape}")
+        return self._finished(work, frame_index)
 
     def _finished(self, work: np.ndarray, frame_index: int) -> np.ndarray:
         out = np.empty(work.shape, dtype=np.uint8)

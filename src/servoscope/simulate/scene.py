@@ -1,7 +1,9 @@
 """What the camera sees: a rotor blade's airfoil section, two stickers, an LED.
 
 Coordinates are *ideal* (undistorted) pixel coordinates: x right, y down,
-pixel centres on integers. The blade is described in its own frame
+pixel centres on integers; for a camera that looks at the blade obliquely they
+are *plane px*, the pixels of a square-on camera at the same distance, which the
+view's homography (:mod:`servoscope.simulate.view`) maps to the ideal image. The blade is described in its own frame
 ``(u, v)``: ``u`` along the chord towards the leading edge, ``v``
 perpendicular to it, pointing up in the image at zero pitch; the origin is
 the pivot (pitch axis). Blade pitch ``p`` rotates the blade about the pivot
@@ -21,6 +23,7 @@ import numpy as np
 
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 from ..errors import ServoscopeError
+from .view import densify_closed
 
 __all__ = [
     "Clutter",
@@ -178,18 +181,6 @@ class Clutter:
         x = local[:, 0] * c + local[:, 1] * s
         y = -local[:, 0] * s + local[:, 1] * c
         return np.stack([x + self.centre_px[0], y + self.centre_px[1]], axis=1)
-
-
-def _densify(closed_xy: np.ndarray, max_segment_px: float) -> np.ndarray:
-    """Subdivide the edges of a closed polygon so that none exceeds ``max_segment_px``."""
-    nxt = np.roll(closed_xy, -1, axis=0)
-    lengths = np.hypot(*(nxt - closed_xy).T)
-    pieces = np.maximum(1, np.ceil(lengths / max_segment_px).astype(int))
-    out = []
-    for a, b, n in zip(closed_xy, nxt, pieces):
-        f = np.arange(n)[:, None] / n
-        out.append(a + f * (b - a))
-    return np.concatenate(out, axis=0)
 
 
 @dataclass(frozen=True)
@@ -370,7 +361,7 @@ class Scene:
         upper = np.stack([u, half], axis=1)
         lower = np.stack([u[::-1], -half[::-1]], axis=1)[1:-1]
         outline = np.concatenate([upper, lower], axis=0)
-        return _densify(outline, self.max_segment_px)
+        return densify_closed(outline, self.max_segment_px)
 
     def sticker_centres_uv(self) -> tuple[np.ndarray, np.ndarray]:
         """Lead and trail sticker centres in the blade frame."""
@@ -407,7 +398,7 @@ class Scene:
         rect = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])
         # Densify about the corners symmetrically (every edge cut in equal
         # pieces) so that the centroid stays exactly at the origin.
-        return _densify(rect, self.max_segment_px)
+        return densify_closed(rect, self.max_segment_px)
 
     def disk_outline(self, centre_xy_px: np.ndarray, diameter_px: float) -> np.ndarray:
         """Regular ``sticker_vertices``-gon (centroid exactly at the centre), ideal pixels, CCW on screen."""

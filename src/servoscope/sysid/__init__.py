@@ -25,6 +25,7 @@ Modules, each importing only those below it:
 """
 
 from servoscope.sysid._fixed_order import check_held
+from servoscope.sysid._tf_resample import with_gain_scale_uncertainty
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.linearity import AmplitudeCheck, gain_against_amplitude
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
@@ -58,4 +59,5 @@ __all__ = [
     "model_step_metrics",
     "rigid_motion_null",
     "select_order",
+    "with_gain_scale_uncertainty",
 ]

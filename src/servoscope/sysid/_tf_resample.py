@@ -6,6 +6,7 @@ the model from its estimate to a subset of the dwells.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -19,7 +20,7 @@ from servoscope.sysid._tf_minimize import local_fit
 from servoscope.results import readonly
 from servoscope.sysid.tf_result import TransferFunctionFit
 
-__all__ = ["bootstrap_dwells", "with_jackknife"]
+__all__ = ["bootstrap_dwells", "with_gain_scale_uncertainty", "with_jackknife"]
 
 
 def _refit(fit: TransferFunctionFit, d: FitData, sub: FitData) -> NDArray[np.float64] | None:
@@ -122,3 +123,50 @@ def bootstrap_dwells(
         else:
             ci[name] = (float("nan"), float("nan"))
     return samples, ci, warns
+
+
+def with_gain_scale_uncertainty(fit: TransferFunctionFit, relative_stderr: float, reason: str) -> TransferFunctionFit:
+    """The fit with an uncertainty of the angle's scale added to its gain's.
+
+    Every dwell's gain shares one scale error when the angles themselves are read with a
+    scale uncertainty (a plane calibrated from a board photo, a view estimated from the
+    footage): no number of dwells averages it away, so it is added to the gain's standard
+    error in quadrature, ``σK² + (K·relative_stderr)²``, after the fit. The other parameters
+    (frequencies, damping, dead time) are ratios of the response's shape and keep theirs.
+
+    Parameters
+    ----------
+    fit : TransferFunctionFit
+    relative_stderr : float
+        The angle scale's relative standard uncertainty (0.01: 1 %).
+    reason : str
+        Where it comes from, said in the fit's warnings when it widens the interval by more
+        than 10 %.
+    """
+    rel = float(relative_stderr)
+    if not (math.isfinite(rel) and rel > 0) or "gain" not in fit.stderr:
+        return fit
+    k = float(fit.params.get("gain", fit.gain))
+    old = float(fit.stderr["gain"])
+    new = math.hypot(old, abs(k) * rel)
+    names = list(fit.param_names)
+    stderr = {**fit.stderr, "gain": new}
+    cov = np.array(fit.covariance, dtype=np.float64, copy=True)
+    if "gain" in names and cov.ndim == 2 and cov.size:
+        i = names.index("gain")
+        cov[i, i] = new * new
+    vals = np.array([fit.params[n] for n in names])
+    ses = np.array([stderr[n] for n in names])
+    ci = ci95_intervals(names, vals, ses, fit.n_residuals - fit.n_params)
+    boot = None
+    if fit.ci95_bootstrap is not None and "gain" in fit.ci95_bootstrap:
+        lo, hi = fit.ci95_bootstrap["gain"]
+        add = 1.96 * abs(k) * rel
+        boot = {**fit.ci95_bootstrap, "gain": (k - math.hypot(k - lo, add), k + math.hypot(hi - k, add))}
+    warns = fit.warnings
+    if new > 1.1 * old:
+        warns = tuple(dict.fromkeys(warns + (f"the gain's interval includes the angle scale's uncertainty "
+                                             f"({100.0 * rel:.2g} %, {reason}): ×{new / old:.1f} wider",)))
+    extra = stderr_fields(fit._structure, stderr) if fit._structure is not None else {"gain_stderr": new}
+    return replace(fit, covariance=readonly(cov), stderr=stderr, ci95=ci,
+                   ci95_bootstrap=boot if boot is not None else fit.ci95_bootstrap, warnings=warns, **extra)

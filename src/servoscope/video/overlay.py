@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from ..camera.model import CameraModel
+from ..camera.plane_map import recorded_points
 from ..errors import ServoscopeError
 from .reader import iter_frames, probe_video
 from .writer import VideoWriter, container_suffixes
@@ -148,6 +149,7 @@ def write_overlay(
     *,
     camera: CameraModel | None = None,
     bit_rate: int | None = None,
+    plane=None,
 ) -> Path:
     """Write the footage with the track drawn on it, as H.264 MP4.
 
@@ -165,6 +167,9 @@ def write_overlay(
         with it before drawing. None: drawn where the track says.
     bit_rate : int, optional
         H.264 bit rate (bit/s); default :func:`overlay_bit_rate`.
+    plane : Plane, optional
+        The plane the track was measured in (``servoscope.camera.plane.Plane``): its
+        positions are mapped back into the picture first.
 
     Returns
     -------
@@ -184,8 +189,8 @@ def write_overlay(
     if out_path.resolve() == video_path.resolve():
         raise ServoscopeError(f"{out_path}: would overwrite the footage itself; choose another file")
     info = probe_video(video_path)
-    lead = _recorded(np.asarray(track.lead_xy_px, dtype=np.float64).reshape(-1, 2), camera)
-    trail = _recorded(np.asarray(track.trail_xy_px, dtype=np.float64).reshape(-1, 2), camera)
+    lead = recorded_points(np.asarray(track.lead_xy_px, dtype=np.float64).reshape(-1, 2), camera, plane)
+    trail = recorded_points(np.asarray(track.trail_xy_px, dtype=np.float64).reshape(-1, 2), camera, plane)
     lead_r = np.sqrt(np.asarray(track.lead_area_px, dtype=np.float64) / math.pi)
     trail_r = np.sqrt(np.asarray(track.trail_area_px, dtype=np.float64) / math.pi)
     # A track of a deinterlaced video has one row per *field*, two per
@@ -234,14 +239,3 @@ def write_overlay(
 def _mismatch(video_path: Path, track, n_rows: int, n_frames: int) -> str:
     return (f"{video_path}: the track has {n_rows} rows but the video has {n_frames} frames: "
             f"is it the track of another video ({track.video})?")
-
-
-def _recorded(points: np.ndarray, camera: CameraModel | None) -> np.ndarray:
-    """Ideal-image centroids → recorded-image pixels (NaN rows kept NaN)."""
-    if camera is None or not camera.has_distortion:
-        return points
-    out = points.copy()
-    good = np.all(np.isfinite(points), axis=1)
-    if good.any():
-        out[good] = camera.distort_points(points[good])
-    return out

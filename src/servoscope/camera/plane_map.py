@@ -1,0 +1,128 @@
+"""Centroids from the (ideal) image into the blade's plane, and the checks that a plane fits the footage.
+
+The plane (:class:`~servoscope.camera.plane.Plane`, made by ``servoscope plane`` from a board
+held against the blade) maps ideal image pixels to its *rectified* pixels: the picture a
+square-on camera at the same distance would record, at the picture's own scale near its
+centre. Angles, separations, heave and bending measured there are the plane's.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ServoscopeError
+from .model import CameraModel
+from .plane import Plane
+
+__all__ = ["centroids_in_plane", "plane_camera", "recorded_points"]
+
+
+def plane_camera(plane: Plane, camera: CameraModel | None, size: tuple[int, int], where: str | Path) -> CameraModel | None:
+    """The lens model to undistort with before the plane, after checking the plane fits the footage.
+
+    Parameters
+    ----------
+    plane : Plane
+    camera : CameraModel or None
+        The campaign's (or ``--calibration``'s) lens model.
+    size : (int, int)
+        The footage's frame size (width, height), upright.
+    where : str or Path
+        The video, for the message.
+
+    Returns
+    -------
+    CameraModel or None
+        ``camera``, or the plane's own when ``camera`` is None.
+
+    Raises
+    ------
+    ServoscopeError
+        A plane made from photos of another size, or with another calibration than ``camera``
+        (its homography maps undistorted points of *that* lens), or without one while the
+        footage is undistorted by ``camera``.
+    """
+    name = plane.source or "plane.json"
+    if tuple(plane.image_size) != tuple(size):
+        raise ServoscopeError(f"{where}: frames are {size[0]}x{size[1]} but {name} was made from "
+                              f"{plane.image_size[0]}x{plane.image_size[1]} photos: photograph the board "
+                              "with the campaign's camera in the same mode (servoscope plane)")
+    own = plane.camera
+    if own is None:
+        if camera is not None and camera.has_distortion:
+            raise ServoscopeError(f"{where}: {name} was made without a lens calibration but the footage is "
+                                  "undistorted with one: make the plane again with "
+                                  "`servoscope plane … --calibration camera.json`")
+        return camera
+    if camera is None:
+        return own
+    same = (tuple(camera.image_size) == tuple(own.image_size)
+            and np.allclose(camera.camera_matrix, own.camera_matrix, rtol=1e-9, atol=1e-9)
+            and np.allclose(camera.dist_coeffs, own.dist_coeffs, rtol=1e-9, atol=1e-12))
+    if not same:
+        raise ServoscopeError(f"{where}: {name} was made with another camera calibration than the one given: "
+                              "make the plane again with the campaign's camera.json (servoscope plane "
+                              "… --calibration camera.json)")
+    return camera
+
+
+def centroids_in_plane(plane: Plane, xy_px: np.ndarray, sigma_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Map centroids into the plane's rectified pixels, with their uncertainty.
+
+    Parameters
+    ----------
+    plane : Plane
+    xy_px : ndarray, shape (n, 2)
+        Ideal (undistorted) image centroids; NaN rows kept.
+    sigma_px : ndarray, shape (n,)
+        Each coordinate's standard uncertainty in the image (px).
+
+    Returns
+    -------
+    xy : ndarray, shape (n, 2)
+        Rectified px.
+    sigma : ndarray, shape (n,)
+        The uncertainty there: the image's scaled by the map's local area scale
+        ``√|det J|`` (the geometric mean of its stretches; the map is near a similarity
+        over a sticker).
+    """
+    xy = np.array(xy_px, dtype=np.float64, copy=True).reshape(-1, 2)
+    sigma = np.array(sigma_px, dtype=np.float64, copy=True).reshape(-1)
+    good = np.all(np.isfinite(xy), axis=1)
+    if good.any():
+        jac = plane.rectified_jacobian(xy[good])
+        xy[good] = plane.to_rectified(xy[good])
+        sigma[good] = sigma[good] * np.sqrt(np.abs(np.linalg.det(jac)))
+    return xy, sigma
+
+
+def recorded_points(points: np.ndarray, camera: CameraModel | None, plane: Plane | None = None) -> np.ndarray:
+    """A track's positions back in the recorded picture, for drawing on its frames.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+        Positions as a track holds them: the plane's rectified px with a plane, else ideal
+        (undistorted) px with a lens model, else recorded px. NaN rows kept NaN.
+    camera : CameraModel or None
+        The lens model the track was made with (the plane's own when the track had none).
+    plane : Plane or None
+        The plane the track was measured in.
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+        Recorded-image px.
+    """
+    out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 2)
+    good = np.all(np.isfinite(out), axis=1)
+    if not good.any():
+        return out
+    if plane is not None:
+        out[good] = plane.from_rectified(out[good])
+        camera = camera if camera is not None else plane.camera
+    if camera is not None and camera.has_distortion:
+        out[good] = camera.distort_points(out[good])
+    return out

@@ -1,0 +1,64 @@
+"""The command line's side of the blade's plane: ``track --plane``/``--self-calibrate-plane`` (issue 27)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from .camera.plane import Plane
+from .campaign.plane_check import pooled_view, view_warning, with_view_correction
+from .errors import ServoscopeError
+
+__all__ = ["load_plane_option", "track_in_view"]
+
+
+def load_plane_option(plane_json: Path | None, self_calibrate: bool) -> Plane | None:
+    """``--plane``'s plane.json, read (one clear line when it is not one); refused beside ``--self-calibrate-plane``."""
+    if plane_json is None:
+        return None
+    if self_calibrate:
+        raise ServoscopeError(f"--plane {plane_json} and --self-calibrate-plane: give one of them (the plane "
+                              "from a board photo corrects the perspective too)")
+    return Plane.load(plane_json)
+
+
+def track_in_view(name: str, result, self_calibrate: bool):
+    """The track checked for a camera that is not square-on: a warning, or (asked) corrected by the footage's view.
+
+    Parameters
+    ----------
+    name : str
+        The footage's name, for the messages.
+    result : Track
+    self_calibrate : bool
+        Correct the track by the view its markers show (``--self-calibrate-plane``).
+
+    Returns
+    -------
+    Track
+        ``result`` with the view's warning added, or corrected.
+
+    Raises
+    ------
+    ServoscopeError
+        ``self_calibrate`` where the footage does not tell the view.
+    """
+    view = pooled_view([result])
+    if not self_calibrate:
+        said = view_warning(view, plane=result.plane)
+        if said:
+            result.warnings.append(said)
+        return result
+    if view is None or not view.determined:
+        told = "too few valid frames" if view is None else (
+            f"a {view.swing_deg:.1f}° swing gives {view.view_angle_deg:.0f}° (95 %: "
+            f"{view.view_angle_ci95_deg[0]:.0f}–{view.view_angle_ci95_deg[1]:.0f}°)")
+        raise ServoscopeError(f"{name}: the footage does not tell the camera's view ({told}): the blade must turn "
+                              "further for --self-calibrate-plane; calibrate the plane with a board photo instead "
+                              "(servoscope plane)")
+    mids = 0.5 * (result.lead_xy_px + result.trail_xy_px)[result.valid]
+    click.echo(f"{name}: angles corrected for the camera's view: {view.describe()} (the foreshortening only, not the "
+               "perspective)")
+    return with_view_correction(result, view, tuple(float(v) for v in np.median(mids, axis=0)))
