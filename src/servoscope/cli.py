@@ -224,8 +224,8 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
               help="plane.json (servoscope plane): angles, separation, heave and bending measured in the blade's "
                    "plane, true for a camera that is not square-on.")
 @click.option("--self-calibrate-plane", is_flag=True,
-              help="Without a plane: correct the angles for the camera's view as the markers' separation tells it "
-                   "(the foreshortening, not the perspective); refused where the blade turns too little to tell.")
+              help="Without a plane: correct the angles for the camera's view as the stickers tell it "
+                   "(stickers' shapes and sizes: foreshortening and perspective; round or square stickers of one size).")
 @_frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
           readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
@@ -276,7 +276,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
                                lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
                                reference=reference_pair, extra=tuple(extra), plane=plane)
     result = track_video(video, settings)
-    result = track_in_view(name, result, self_calibrate_plane)
+    result = track_in_view(name, result, self_calibrate_plane, settings.camera, plane)
     from .video.reader import probe_video
 
     note = probe_video(video).conversion_note()
@@ -453,8 +453,9 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
               help="Also fit models to the dwells' and the step's whole traces: linear, one nonlinear structure beside "
                    "it, or auto (every structure, selected by BIC). none: the frequency-domain fit alone.")
 @click.option("--self-calibrate-plane", is_flag=True,
-              help="Without [camera] plane: correct the angles for the camera's view as the markers' separation tells "
-                   "it (the foreshortening, not the perspective), the gain's interval widened by its uncertainty.")
+              help="Without [camera] plane: correct the angles for the camera's view as the stickers tell "
+                   "them (shapes and sizes: round or square stickers of one size), the gain's interval widened by its "
+                   "uncertainty.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
              workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
              bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str, self_calibrate_plane: bool) -> None:

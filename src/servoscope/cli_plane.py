@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from .camera.plane import Plane
 from .campaign.plane_check import pooled_view, view_warning, with_view_correction
@@ -24,7 +23,7 @@ def load_plane_option(plane_json: Path | None, self_calibrate: bool) -> Plane | 
     return Plane.load(plane_json)
 
 
-def track_in_view(name: str, result, self_calibrate: bool):
+def track_in_view(name: str, result, self_calibrate: bool, camera=None, plane: Plane | None = None):
     """The track checked for a camera that is not square-on: a warning, or (asked) corrected by the footage's view.
 
     Parameters
@@ -34,6 +33,10 @@ def track_in_view(name: str, result, self_calibrate: bool):
     result : Track
     self_calibrate : bool
         Correct the track by the view its markers show (``--self-calibrate-plane``).
+    camera : CameraModel, optional
+        The lens model the track was made with.
+    plane : Plane, optional
+        The plane it was measured in (the view is then a check of it).
 
     Returns
     -------
@@ -45,20 +48,16 @@ def track_in_view(name: str, result, self_calibrate: bool):
     ServoscopeError
         ``self_calibrate`` where the footage does not tell the view.
     """
-    view = pooled_view([result])
+    view = pooled_view([result], camera, plane)
     if not self_calibrate:
         said = view_warning(view, plane=result.plane)
         if said:
             result.warnings.append(said)
         return result
     if view is None or not view.determined:
-        told = "too few valid frames" if view is None else (
-            f"a {view.swing_deg:.1f}° swing gives {view.view_angle_deg:.0f}° (95 %: "
-            f"{view.view_angle_ci95_deg[0]:.0f}–{view.view_angle_ci95_deg[1]:.0f}°)")
-        raise ServoscopeError(f"{name}: the footage does not tell the camera's view ({told}): the blade must turn "
-                              "further for --self-calibrate-plane; calibrate the plane with a board photo instead "
-                              "(servoscope plane)")
-    mids = 0.5 * (result.lead_xy_px + result.trail_xy_px)[result.valid]
-    click.echo(f"{name}: angles corrected for the camera's view: {view.describe()} (the foreshortening only, not the "
-               "perspective)")
-    return with_view_correction(result, view, tuple(float(v) for v in np.median(mids, axis=0)))
+        told = "too few sharp frames" if view is None else view.why
+        raise ServoscopeError(f"{name}: the footage does not tell the camera's view ({told}) for "
+                              "--self-calibrate-plane; calibrate the plane with a board photo instead (servoscope plane)")
+    click.echo(f"{name}: angles corrected for the camera's view: {view.describe()} (resting on round or square "
+               "stickers of one size)")
+    return with_view_correction(result, view)

@@ -1,35 +1,40 @@
-"""How far off square the camera looks at the blade's plane, told by the footage alone (issue 27).
+"""How the camera sees the blade's plane, told by the stickers themselves (issue 27).
 
-A camera that does not face the blade's plane square-on changes the angles it sees. Near the
-blade, the view is an affine map ``A`` of the plane (the local Jacobian of the plane's
-homography): the vector from the trail to the lead sticker, a fixed length ``L`` on the
-blade, is seen as ``v = A·u(θ)``, so the vectors of every frame lie on the ellipse
-``vᵀ·M·v = L²`` with ``M = A⁻ᵀA⁻¹``. A square-on camera's ellipse is a circle. The
-difference ``v`` of two points placed symmetrically about their midpoint is the Jacobian at
-the midpoint times their difference, up to third order: perspective across the blade cancels.
+A camera that does not face the blade's plane square-on changes the angles it sees: by
+foreshortening (the cosine of the view angle across the blade) and by perspective (the nearer
+sticker looks bigger and moves more: with the twin's default stickers 600 px apart at a focal
+length of 1100 px, 10° of yaw changes the angles' scale by −1.3 %, where foreshortening alone
+would say +1.5 %). Both are in the map ``G`` from the image to the plane, a homography.
 
-What does not cancel is the midpoint's own depth: as the blade pitches, the midpoint moves on
-an arc about the pivot, nearer and farther, and the whole picture of the blade scales with it.
-A scale leaves angles alone but changes the separation in step with the angle, as an oblique
-view would. The stickers' soft areas tell that scale (a sticker's area is its Jacobian's
-determinant times its own, whatever its orientation): ``log(area_lead·area_trail)`` is fitted as
-a linear function of the midpoint's position and the separation vectors are divided by the
-scale it gives before the ellipse is fitted.
+The stickers measure ``G`` where they are, in every frame: a round (or square) sticker has
+isotropic second moments in the plane, so the ellipse its image draws (the soft membership's
+second moments, :attr:`~servoscope.markers.Track.lead_shape_px2`) is the local Jacobian of the
+view, and its area is that Jacobian's determinant times the sticker's own area. Two stickers
+a chord apart, each seen in many frames, give the Jacobian at two places, which tells the
+affine part (foreshortening: 2 numbers) and the projective part (perspective: 2 numbers) of
+``G`` up to a similarity of the plane, which does not change angles. The fit:
 
-The ellipse is fitted by linear least squares (``a·vx² + 2b·vx·vy + c·vy² = 1``); the
-parameters' covariance from the residuals, inflated for their correlation from frame to frame
-(an AR(1) long-run variance), is sampled (seeded) to give the view angle's and the angle
-gain's intervals. A blade that turns little draws a short arc of the ellipse, which does not
-determine it: the intervals then say so, and :attr:`ObliqueView.determined` is False.
+* ``G = U·P`` in image coordinates centred on the blade and scaled by the stickers' separation,
+  ``P(x) = x / (1 + g·x)`` and ``U = [[p, q], [0, 1]]`` (4 parameters), plus the stickers' common
+  area in the plane (the stickers are assumed to be the same size, as one punch cuts them);
+* per sticker and frame, three residuals: the anisotropy of ``J·M·Jᵀ`` (2 numbers, 0 for a round
+  sticker) and the log of its area in the plane less the common one;
+* frames where a sticker moved less than :data:`SLOW_PX` between frames (motion blur stretches
+  the moments along the motion), each residual kind weighted by its own scatter; the
+  covariance inflated for the residuals' correlation from frame to frame, and sampled (seeded)
+  for the intervals, to which the systematic errors measured on the twin are added
+  (:data:`VIEW_SYSTEMATIC_DEG`, :data:`GAIN_SYSTEMATIC`, :data:`GAIN_SYSTEMATIC_FRACTION`): the
+  tracker's moments carry a small anisotropy of their own (a square-on camera reads 4°), and the
+  perspective's share of the gain read 20 % short at 30° off square.
 
-From ``M`` (scaled to determinant 1, ``Mₙ``):
+From ``G``: the view angle at the blade, ``arccos(σmin/σmax)`` of its Jacobian; the angle gain,
+the slope of the image's angles against the plane's over the frames; the correction, ``G``
+followed by the similarity that keeps the blade's midpoint, its scale and the image's +x
+(a homography from image px to the plane's rectified px, as a board photo's plane gives).
 
-* the view angle α off square: ``cos α = √(λmin/λmax)``;
-* the angle gain of the image near the blade's direction ``d`` (a unit vector): an angle seen
-  in the image is ``dᵀMₙd`` times the angle in the plane (less than 1: the camera looks across
-  the blade and angles read small);
-* the affine correction ``Mₙ^½`` (symmetric, determinant 1): image points mapped by it lie in
-  a copy of the plane up to a rotation; perspective is not corrected by it.
+Stickers that are not isotropic (strips, rectangles) carry their own anisotropy, which turns
+with the blade: the fit's anisotropy residuals then follow the blade's angle, and the view is
+reported as not told (:attr:`ObliqueView.determined` False).
 """
 
 from __future__ import annotations
@@ -38,45 +43,58 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
-__all__ = ["ObliqueView", "oblique_view", "OBLIQUE_MIN_FRAMES"]
+__all__ = ["ObliqueView", "OBLIQUE_MIN_FRAMES", "SLOW_PX", "oblique_view"]
 
-#: Fewer valid frames than this and the view is not estimated.
+#: Fewer usable frames than this and the view is not estimated.
 OBLIQUE_MIN_FRAMES = 30
-#: Draws of the ellipse's parameters for the intervals (seeded: the same footage, the same answer).
-_DRAWS = 4000
+#: A sticker that moved less than this between neighbouring frames (px) is taken as sharp: a
+#: blur of 0.3 px adds 0.3²/12 px² to a 26 px sticker's 42 px² second moment (0.02 %).
+SLOW_PX = 0.3
+#: Frames the fit uses at most (spread evenly over those that qualify).
+_MAX_FRAMES = 3000
+#: Systematic errors of the estimate, measured on the twin's raw footage (480×384, quick preset, round
+#: stickers; docs/accuracy.md "Oblique views"): a square-on camera read 4° (3–5°) off square, 23.7° read
+#: 23.0°, 30.4° read 28°; the angle gain's effect read 20 % short at 30° off square (+18.8 % for +23 %)
+#: and 0.2 % off square-on. The intervals add them to the fit's own (in quadrature).
+VIEW_SYSTEMATIC_DEG = 4.0
+GAIN_SYSTEMATIC = 0.003
+GAIN_SYSTEMATIC_FRACTION = 0.2
+#: Draws of the fitted parameters for the intervals (seeded: the same footage, the same answer).
+_DRAWS = 1000
 _SEED = 27
 
 
 @dataclass(frozen=True)
 class ObliqueView:
-    """The camera's view of the blade's plane, as the markers' separation tells it.
+    """The camera's view of the blade's plane, as the stickers' shapes and sizes tell it.
 
     Attributes
     ----------
     view_angle_deg : float
-        The angle between the plane's normal and the camera's line of sight (0: square-on).
+        The angle between the plane's normal and the line of sight at the blade (0: square-on).
     view_angle_ci95_deg : (float, float)
-        Its 95 % interval (from the fit's sampled covariance).
+        Its 95 % interval.
     axis_deg : float
-        The image direction the view foreshortens, counter-clockwise from +x as seen (deg).
+        The image direction the view foreshortens most, counter-clockwise from +x (deg).
     angle_gain : float
-        Angles seen in the image per angle in the plane, near the blade's mean direction
-        (1: square-on; 0.94: the image reads angles 6 % small).
+        Angles seen in the image per angle in the plane over the blade's swing (1: square-on;
+        0.94: the image reads angles 6 % small), foreshortening and perspective together.
     angle_gain_ci95 : (float, float)
         Its 95 % interval.
     swing_deg : float
-        How far the blade turned over the frames used (the ellipse's arc, deg).
+        How far the blade turned over the frames used (deg).
     n_frames : int
         Frames the fit used.
     determined : bool
-        Whether the footage tells the view: the view angle's interval narrower than 10° and
-        the angle gain's than 2 % (a longer arc is needed otherwise).
-    correction : ndarray, shape (2, 2)
-        ``Mₙ^½``: image vectors to the plane's, up to a rotation (determinant 1).
-    scale_gradient_per_px : (float, float)
-        The picture's relative scale change per px of the midpoint's motion (from the stickers'
-        areas), taken out before the ellipse was fitted.
+        Whether the footage tells the view: enough sharp frames, and stickers that look alike
+        in the plane whatever the blade's angle (round or square ones).
+    correction : ndarray, shape (3, 3)
+        The homography from image px to the plane's rectified px (the blade's midpoint kept,
+        its scale and the image's +x direction kept).
+    why : str
+        What the estimate rests on, or why it is not told.
     """
 
     view_angle_deg: float
@@ -88,10 +106,10 @@ class ObliqueView:
     n_frames: int
     determined: bool
     correction: np.ndarray
-    scale_gradient_per_px: tuple[float, float]
+    why: str = ""
 
     def summary(self) -> dict:
-        """Plain-typed fields, as result.json and ``servoscope track --json`` hold them."""
+        """Plain-typed fields, as result.json holds them."""
         return {
             "view_angle_deg": self.view_angle_deg,
             "view_angle_ci95_deg": list(self.view_angle_ci95_deg),
@@ -102,7 +120,7 @@ class ObliqueView:
             "n_frames": self.n_frames,
             "determined": self.determined,
             "correction": self.correction.tolist(),
-            "scale_gradient_per_px": list(self.scale_gradient_per_px),
+            "why": self.why,
         }
 
     @classmethod
@@ -114,16 +132,17 @@ class ObliqueView:
                    angle_gain_ci95=tuple(float(v) for v in data["angle_gain_ci95"]),  # type: ignore[arg-type]
                    swing_deg=float(data["swing_deg"]), n_frames=int(data["n_frames"]),
                    determined=bool(data["determined"]), correction=np.asarray(data["correction"], dtype=np.float64),
-                   scale_gradient_per_px=tuple(float(v) for v in data["scale_gradient_per_px"]))  # type: ignore[arg-type]
+                   why=str(data.get("why", "")))
 
     def describe(self) -> str:
         """One sentence: the view angle, its interval, what it does to angles."""
         lo, hi = self.view_angle_ci95_deg
         gain = self.angle_gain - 1.0
+        glo, ghi = (100.0 * (g - 1.0) for g in self.angle_gain_ci95)
         sense = "small" if gain < 0 else "large"
         return (f"the camera looks at the blade {self.view_angle_deg:.0f}° off square (95 %: {lo:.0f}–{hi:.0f}°, "
-                f"from the markers' separation over a {self.swing_deg:.1f}° swing): angles read about "
-                f"{abs(100.0 * gain):.1f} % {sense}")
+                f"from the stickers' shapes and sizes): angles read about {abs(100.0 * gain):.1f} % {sense} "
+                f"(95 %: {glo:+.1f} to {ghi:+.1f} %)")
 
 
 def _ar1_inflation(resid: np.ndarray, segments: np.ndarray) -> float:
@@ -138,121 +157,198 @@ def _ar1_inflation(resid: np.ndarray, segments: np.ndarray) -> float:
     return (1.0 + rho) / (1.0 - rho)
 
 
-def _square_on_within_95(m: np.ndarray, cov: np.ndarray) -> bool:
-    """Whether a circle (a = c, b = 0) lies inside the fit's 95 % region (χ² with 2 degrees of freedom)."""
-    # The anisotropy (a − c, 2b) is linear in the parameters: its covariance follows exactly.
-    t = np.array([[1.0, 0.0, -1.0], [0.0, 2.0, 0.0]])
-    e = t @ m
-    ce = t @ cov @ t.T
+def _square_on_within_95(theta: np.ndarray, cov: np.ndarray) -> bool:
+    """Whether the square-on view (p = 1, q = g1 = g2 = 0) lies inside the fit's 95 % region (χ², 4 d.o.f.)."""
+    e = theta - np.array([1.0, 0.0, 0.0, 0.0])
     try:
-        d2 = float(e @ np.linalg.solve(ce, e))
+        d2 = float(e @ np.linalg.solve(cov, e))
     except np.linalg.LinAlgError:
         return True
-    return d2 <= 5.991
+    return d2 <= 9.488
 
 
-def _normalised(m: np.ndarray) -> np.ndarray | None:
-    """``[a, b, c]`` rows as 2×2 matrices scaled to determinant 1; None where not positive definite."""
-    a, b, c = m[..., 0], m[..., 1], m[..., 2]
-    det = a * c - b * b
-    ok = (det > 0) & (a > 0)
-    s = np.where(ok, 1.0 / np.sqrt(np.where(ok, det, 1.0)), np.nan)
-    return np.stack([np.stack([a * s, b * s], -1), np.stack([b * s, c * s], -1)], -2)
+def _map(theta: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``G(x)`` and its Jacobian (…, 2, 2) for parameters ``(p, q, g1, g2)`` at normalised points (…, 2)."""
+    # Parameters broadcast against the points' leading shape (a row per draw, or one set for all).
+    p, q, g1, g2 = theta[..., 0], theta[..., 1], theta[..., 2], theta[..., 3]
+    w = 1.0 + g1 * x[..., 0] + g2 * x[..., 1]
+    px, py = x[..., 0] / w, x[..., 1] / w
+    out = np.stack([p * px + q * py, py], axis=-1)
+    # J_P = (I·w − x·gᵀ)/w², then J = U·J_P.
+    jp = np.empty(x.shape[:-1] + (2, 2))
+    jp[..., 0, 0] = (w - x[..., 0] * g1) / w**2
+    jp[..., 0, 1] = (-x[..., 0] * g2) / w**2
+    jp[..., 1, 0] = (-x[..., 1] * g1) / w**2
+    jp[..., 1, 1] = (w - x[..., 1] * g2) / w**2
+    jac = np.empty_like(jp)
+    jac[..., 0, :] = p[..., None] * jp[..., 0, :] + q[..., None] * jp[..., 1, :]
+    jac[..., 1, :] = jp[..., 1, :]
+    return out, jac
 
 
-def _angle_and_gain(mn: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """View angle (deg) and angle gain ``dᵀMₙd`` of determinant-1 matrices (…, 2, 2)."""
-    tr = mn[..., 0, 0] + mn[..., 1, 1]
-    # Eigenvalues λ and 1/λ of a determinant-1 matrix: λ + 1/λ = trace.
-    lam_max = 0.5 * (tr + np.sqrt(np.maximum(tr * tr - 4.0, 0.0)))
-    cos_a = np.clip(1.0 / lam_max, 0.0, 1.0)  # √(λmin/λmax) = 1/λmax
-    gain = np.einsum("i,...ij,j->...", d, mn, d)
-    return np.degrees(np.arccos(cos_a)), gain
+def _residuals(params: np.ndarray, x: np.ndarray, moments: np.ndarray, log_area: np.ndarray,
+               scale: np.ndarray) -> np.ndarray:
+    """Per observation: the anisotropy of the sticker in the plane (2) and its log area less the common one."""
+    _, jac = _map(params[:4], x)
+    m = jac @ moments @ np.swapaxes(jac, -1, -2)
+    tr = m[:, 0, 0] + m[:, 1, 1]
+    det = np.abs(jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0])
+    return np.concatenate([((m[:, 0, 0] - m[:, 1, 1]) / tr) / scale[0], (2.0 * m[:, 0, 1] / tr) / scale[0],
+                           (log_area + np.log(det) - params[4]) / scale[1]])
 
 
-def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, valid: np.ndarray, *,
-                 lead_area_px: np.ndarray | None = None, trail_area_px: np.ndarray | None = None,
-                 segment: np.ndarray | None = None) -> ObliqueView | None:
-    """Estimate the camera's view of the blade's plane from the markers' separation.
+def _angles(theta: np.ndarray, lead_n: np.ndarray, trail_n: np.ndarray) -> np.ndarray:
+    """The blade's angle in the plane for each parameter row (d, 4) and frame (n): shape (d, n)."""
+    gl, _ = _map(theta[:, None, :], np.broadcast_to(lead_n, (theta.shape[0],) + lead_n.shape))
+    gt, _ = _map(theta[:, None, :], np.broadcast_to(trail_n, (theta.shape[0],) + trail_n.shape))
+    d = gl - gt
+    return np.unwrap(np.arctan2(d[..., 1], d[..., 0]), axis=-1)  # y up in the normalised frame
+
+
+def _slow(xy: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Frames where the sticker moved less than :data:`SLOW_PX` from both neighbours (same recording)."""
+    step = np.full(len(xy), np.inf)
+    d = np.hypot(*np.diff(xy, axis=0).T)
+    d = np.where(ok[1:] & ok[:-1], d, np.inf)
+    step[1:] = d
+    after = np.full(len(xy), np.inf)
+    after[:-1] = d
+    return ok & (np.maximum(step, after) < SLOW_PX)
+
+
+def _correction(theta: np.ndarray, c0: np.ndarray, s0: float, mid_px: np.ndarray) -> np.ndarray:
+    """The homography image px → rectified px: normalise, ``G``, then the similarity that keeps the blade's midpoint."""
+    p, q, g1, g2 = theta
+    norm = np.array([[1.0 / s0, 0.0, -c0[0] / s0], [0.0, -1.0 / s0, c0[1] / s0], [0.0, 0.0, 1.0]])
+    g = np.array([[p, q, 0.0], [0.0, 1.0, 0.0], [g1, g2, 1.0]]) @ norm
+    m = np.array([mid_px[0], mid_px[1], 1.0])
+    gm = g @ m
+    at = gm[:2] / gm[2]
+    # Its Jacobian at the midpoint (image px in, plane units with y up out).
+    jac = (g[:2, :2] * gm[2] - np.outer(gm[:2], g[2, :2])) / gm[2] ** 2
+    flip = np.diag([1.0, -1.0])  # back to y down
+    qm, r = np.linalg.qr(flip @ jac)
+    signs = np.sign(np.diag(r))
+    qm, r = qm * signs, signs[:, None] * r
+    s = 1.0 / math.sqrt(abs(r[0, 0] * r[1, 1]))
+    lin = s * qm.T @ flip
+    t = mid_px - lin @ at
+    return np.array([[lin[0, 0], lin[0, 1], t[0]], [lin[1, 0], lin[1, 1], t[1]], [0.0, 0.0, 1.0]]) @ g
+
+
+def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_px2: np.ndarray,
+                 trail_moments_px2: np.ndarray, lead_area_px: np.ndarray, trail_area_px: np.ndarray,
+                 valid: np.ndarray, *, segment: np.ndarray | None = None,
+                 centre_px: tuple[float, float] | None = None) -> ObliqueView | None:
+    """Estimate the camera's view of the blade's plane from the stickers' shapes and sizes.
 
     Parameters
     ----------
     lead_xy_px, trail_xy_px : ndarray, shape (n, 2)
-        Centroids (undistorted when a lens model is known), px.
+        Centroids, in the frame the moments are given in (y down).
+    lead_moments_px2, trail_moments_px2 : ndarray, shape (n, 2, 2)
+        Each sticker's central second moments over its area (px²), in that frame.
+    lead_area_px, trail_area_px : ndarray, shape (n,)
+        Their areas (px²), in that frame.
     valid : ndarray of bool, shape (n,)
-    lead_area_px, trail_area_px : ndarray, shape (n,), optional
-        The stickers' soft areas (px²), to take out the picture's scale change as the blade's
-        midpoint moves nearer and farther (see the module's notes); None: not taken out.
     segment : ndarray of int, shape (n,), optional
-        Which recording each frame comes from (several tracks pooled): frame-to-frame
-        correlation is measured within a segment only.
+        Which recording each frame comes from (several tracks pooled): neighbours and the
+        residuals' correlation are taken within a recording only.
+    centre_px : (float, float), optional
+        The principal point (the picture's centre when no calibration says otherwise), in the
+        centroids' frame: the view angle is the one there (the optical axis's with the plane's
+        normal, what a tripod's yaw and tilt set). None: at the blade's midpoint.
 
     Returns
     -------
     ObliqueView or None
-        None with fewer than :data:`OBLIQUE_MIN_FRAMES` valid frames.
+        None with fewer than :data:`OBLIQUE_MIN_FRAMES` sharp frames.
     """
     lead = np.asarray(lead_xy_px, dtype=np.float64).reshape(-1, 2)
     trail = np.asarray(trail_xy_px, dtype=np.float64).reshape(-1, 2)
+    n = lead.shape[0]
+    seg = np.zeros(n, dtype=np.int64) if segment is None else np.asarray(segment)
+    mom = [np.asarray(m, dtype=np.float64).reshape(-1, 2, 2) for m in (lead_moments_px2, trail_moments_px2)]
+    area = [np.asarray(a, dtype=np.float64).reshape(-1) for a in (lead_area_px, trail_area_px)]
     ok = np.asarray(valid, dtype=bool) & np.all(np.isfinite(lead), axis=1) & np.all(np.isfinite(trail), axis=1)
-    seg = np.zeros(lead.shape[0], dtype=np.int64) if segment is None else np.asarray(segment)
-    if np.count_nonzero(ok) < OBLIQUE_MIN_FRAMES:
+    for m, a in zip(mom, area):
+        ok &= np.all(np.isfinite(m), axis=(1, 2)) & np.isfinite(a) & (a > 0) & (m[:, 0, 0] > 0) & (m[:, 1, 1] > 0)
+    cut = np.r_[True, seg[1:] != seg[:-1]]
+    ok_n = ok & ~cut & ~np.r_[cut[1:], True]  # a recording's ends have one neighbour only
+    use = _slow(lead, ok_n) & _slow(trail, ok_n)
+    if np.count_nonzero(use) < OBLIQUE_MIN_FRAMES:
         return None
-    v = (lead - trail)[ok]
-    mid = 0.5 * (lead + trail)[ok]
-    seg = seg[ok]
-    grad = np.zeros(2)
-    if lead_area_px is not None and trail_area_px is not None:
-        log_area = np.log(np.asarray(lead_area_px, dtype=np.float64)[ok] * np.asarray(trail_area_px)[ok])
-        use = np.isfinite(log_area)
-        dm = mid - mid[use].mean(axis=0) if use.any() else mid * 0.0
-        if np.count_nonzero(use) >= OBLIQUE_MIN_FRAMES and float(np.ptp(dm[use], axis=0).max()) > 1.0:
-            design = np.c_[np.ones(int(use.sum())), dm[use]]
-            coef = np.linalg.lstsq(design, log_area[use], rcond=None)[0]
-            # log(area_l·area_t) ≈ 4·log(scale): the separation scales by exp(g·dm/4).
-            grad = coef[1:] / 4.0
-            v = v * np.exp(-(dm @ grad))[:, None]
-    q = np.c_[v[:, 0] ** 2, 2.0 * v[:, 0] * v[:, 1], v[:, 1] ** 2]
-    scale = float(np.mean(np.sum(v * v, axis=1)))
-    qn = q / scale  # well conditioned: ~1 per row
-    m, *_ = np.linalg.lstsq(qn, np.ones(len(qn)), rcond=None)
-    resid = qn @ m - 1.0
-    dof = max(len(qn) - 3, 1)
-    sigma2 = float(resid @ resid) / dof * _ar1_inflation(resid, seg)
-    cov = sigma2 * np.linalg.pinv(qn.T @ qn)
-    theta = np.unwrap(np.arctan2(-v[:, 1], v[:, 0]))
-    d_angle = float(np.median(theta))
-    d = np.array([math.cos(d_angle), -math.sin(d_angle)])
-    mn = _normalised(m[None])[0]
-    if not np.all(np.isfinite(mn)):
-        return None
-    angle, gain = (float(x) for x in _angle_and_gain(mn, d))
+    idx = np.flatnonzero(use)
+    idx = idx[np.linspace(0, idx.size - 1, min(idx.size, _MAX_FRAMES)).astype(int)]
+    mid = 0.5 * (lead[idx] + trail[idx])
+    c0 = np.median(mid, axis=0)
+    s0 = float(np.median(np.hypot(*(lead[idx] - trail[idx]).T)))
+    flip = np.diag([1.0, -1.0])
+
+    def norm(xy):
+        return ((xy - c0) / s0) * np.array([1.0, -1.0])
+
+    x = np.concatenate([norm(lead[idx]), norm(trail[idx])])
+    moments = np.concatenate([flip @ mom[0][idx] @ flip, flip @ mom[1][idx] @ flip])
+    log_area = np.log(np.concatenate([area[0][idx], area[1][idx]]))
+    start = np.array([1.0, 0.0, 0.0, 0.0, float(np.mean(log_area))])
+    scale = np.ones(2)
+    sol = least_squares(_residuals, start, args=(x, moments, log_area, scale), method="lm")
+    r = sol.fun
+    k = idx.size
+    aniso, size = r[:4 * k], r[4 * k:]
+    # Each kind of residual weighted by its own scatter (robust), then fitted again.
+    scale = np.array([max(1.4826 * float(np.median(np.abs(aniso - np.median(aniso)))), 1e-6),
+                      max(1.4826 * float(np.median(np.abs(size - np.median(size)))), 1e-6)])
+    sol = least_squares(_residuals, sol.x, args=(x, moments, log_area, scale), method="lm")
+    theta = sol.x
+    # Six blocks of residuals (two kinds of anisotropy and the size, for each sticker): neighbours within one.
+    seg_obs = np.concatenate([seg[idx] + b * (int(seg.max()) + 1) for b in range(6)])
+    inflation = _ar1_inflation(sol.fun, seg_obs)
+    jtj = sol.jac.T @ sol.jac
+    dof = max(sol.fun.size - theta.size, 1)
+    cov = np.linalg.pinv(jtj) * float(sol.fun @ sol.fun) / dof * inflation
+    lead_n, trail_n = norm(lead[idx]), norm(trail[idx])
+    seen = np.unwrap(np.arctan2(trail[idx, 1] - lead[idx, 1], lead[idx, 0] - trail[idx, 0]))
     rng = np.random.default_rng(_SEED)
-    draws = rng.multivariate_normal(m, cov, size=_DRAWS, method="eigh")
-    mns = _normalised(draws)
-    a_d, g_d = _angle_and_gain(mns, d)
-    fine = np.isfinite(a_d) & np.isfinite(g_d)
-    # A draw that is no ellipse at all (an arc too short to tell) counts as "anything".
-    a_d = np.where(fine, a_d, 90.0)
-    a_lo, a_hi = (float(x) for x in np.percentile(a_d, [2.5, 97.5]))
-    if _square_on_within_95(m, cov):
-        a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a circle is not excluded
-    if fine.mean() > 0.975:
-        g_lo, g_hi = (float(x) for x in np.percentile(g_d[fine], [2.5, 97.5]))
-    else:
-        g_lo, g_hi = 0.0, math.inf
-    w, vecs = np.linalg.eigh(mn)
-    root = (vecs * np.sqrt(w)) @ vecs.T
-    axis = vecs[:, 1]  # the largest eigenvalue's: the image direction that came out shortest
+    draws = np.vstack([theta[:4], rng.multivariate_normal(theta[:4], cov[:4, :4], size=_DRAWS, method="eigh")])
+    in_plane = _angles(draws, lead_n, trail_n)
+    span = float(np.ptp(seen))
+    gains = np.array([np.polyfit(row, seen, 1)[0] if span > 1e-4 else 1.0 for row in in_plane])
+    where = norm(np.asarray(centre_px, dtype=np.float64)[None] if centre_px is not None else c0[None])[0]
+    _, jmid = _map(draws[:, None, :], np.broadcast_to(where, (draws.shape[0], 1, 2)))
+    sv = np.linalg.svd(jmid[:, 0], compute_uv=False)
+    angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
+    a_lo, a_hi = (float(v) for v in np.percentile(angles[1:], [2.5, 97.5]))
+    a0 = float(angles[0])
+    # The measured systematic added to the fit's own half-widths, in quadrature.
+    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * VIEW_SYSTEMATIC_DEG)
+    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * VIEW_SYSTEMATIC_DEG)
+    if a_lo <= 0.0 or _square_on_within_95(theta[:4], cov[:4, :4]):
+        a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a square-on view is not excluded
+    g_lo, g_hi = (float(v) for v in np.percentile(gains[1:], [2.5, 97.5]))
+    g0 = float(gains[0])
+    sys_gain = GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
+    g_lo = g0 - math.hypot(g0 - g_lo, 1.96 * sys_gain)
+    g_hi = g0 + math.hypot(g_hi - g0, 1.96 * sys_gain)
+    _, vecs = np.linalg.eigh(jmid[0, 0].T @ jmid[0, 0])
+    axis = flip @ vecs[:, 1]  # the image direction the plane stretches most: the one the view shortened
+    # Stickers that are not isotropic in the plane turn their anisotropy with the blade: it follows the angle.
+    both = np.r_[seen, seen]
+    turning = max(abs(float(np.corrcoef(both, sol.fun[j * 2 * k:(j + 1) * 2 * k])[0, 1])) for j in (0, 1)) \
+        if span > 1e-3 else 0.0
+    fine = turning < 0.5
+    why = (f"{k} sharp frames of both stickers (the stickers taken as round or square, one size)"
+           if fine else "the stickers' shapes change with the blade's angle: not round or square stickers")
     return ObliqueView(
-        view_angle_deg=angle,
-        view_angle_ci95_deg=(min(a_lo, angle), max(a_hi, angle)),
+        view_angle_deg=float(angles[0]),
+        view_angle_ci95_deg=(a_lo, a_hi),
         axis_deg=float(np.degrees(np.arctan2(-axis[1], axis[0])) % 180.0),
-        angle_gain=gain,
-        angle_gain_ci95=(min(g_lo, gain), max(g_hi, gain)),
-        swing_deg=float(np.degrees(np.ptp(theta))),
-        n_frames=int(len(v)),
-        determined=bool(a_hi - a_lo < 10.0 and g_hi - g_lo < 0.02),
-        correction=root,
-        scale_gradient_per_px=(float(grad[0]), float(grad[1])),
+        angle_gain=g0,
+        angle_gain_ci95=(g_lo, g_hi),
+        swing_deg=float(np.degrees(span)),
+        n_frames=int(k),
+        determined=bool(fine),
+        correction=_correction(theta[:4], c0, s0, np.median(mid, axis=0)),
+        why=why,
     )

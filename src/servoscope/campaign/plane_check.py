@@ -1,12 +1,12 @@
 """The camera's view of the blade's plane over a campaign: the check, the warning, the affine correction.
 
-Without a plane (``[camera] plane``), the markers' separation over every frame of every test
-tells how far off square the camera looks (:func:`servoscope.angle.view.oblique_view`): above
+Without a plane (``[camera] plane``), the stickers' shapes and sizes over every sharp frame of every
+test tell how far off square the camera looks (:func:`servoscope.angle.view.oblique_view`): above
 :data:`~servoscope.defaults.OBLIQUE_VIEW_WARNING_DEG` ``identify`` warns with the gain error
 it implies. With a plane, the same estimate on the plane's positions checks the plane: a
 residual view means the plane is not the blade's (another camera position, a board held
 askew). ``identify(self_calibrate_plane=True)`` maps every track by the estimated affine
-correction instead: it takes out the foreshortening, not the perspective.
+correction instead (foreshortening and perspective, resting on round or square stickers of one size).
 """
 
 from __future__ import annotations
@@ -18,38 +18,108 @@ import numpy as np
 from ..angle.geometry import blade_angle
 from ..angle.rigid import rigid_motion
 from ..angle.view import ObliqueView, oblique_view
-from ..defaults import OBLIQUE_VIEW_LOWER_DEG, OBLIQUE_VIEW_WARNING_DEG
+from ..defaults import OBLIQUE_GAIN_WARNING, OBLIQUE_VIEW_WARNING_DEG
 from ..errors import ServoscopeError
+from ..camera.model import CameraModel
+from ..camera.plane import Plane
 from ..markers.track import Track
 from .manifest import Campaign
 
-__all__ = ["SELF_CALIBRATED", "campaign_in_view", "plane_summary", "pooled_view", "view_warning", "with_view_correction"]
+__all__ = ["SELF_CALIBRATED", "campaign_in_view", "plane_summary", "pooled_view", "sticker_observations", "view_warning",
+           "with_view_correction"]
 
 #: What a track says of the plane it was measured in when the footage's own view corrected it.
-SELF_CALIBRATED = "self-calibrated (affine)"
+SELF_CALIBRATED = "self-calibrated (stickers' shapes)"
 
 
-def pooled_view(tracks: list[Track]) -> ObliqueView | None:
-    """The view estimated from every valid frame of ``tracks`` together (one camera set-up).
+def _moments(shape_px2: np.ndarray) -> np.ndarray:
+    """A track's (mu20, mu11, mu02) rows as 2×2 second-moment matrices."""
+    m = np.asarray(shape_px2, dtype=np.float64).reshape(-1, 3)
+    return np.stack([np.stack([m[:, 0], m[:, 1]], -1), np.stack([m[:, 1], m[:, 2]], -1)], -2)
+
+
+def _jacobian(fn, xy: np.ndarray, h: float = 0.5) -> np.ndarray:
+    """The Jacobian (n, 2, 2) of a point map at ``xy`` by central differences (the lens varies over hundreds of px)."""
+    jx = (fn(xy + [h, 0.0]) - fn(xy - [h, 0.0])) / (2.0 * h)
+    jy = (fn(xy + [0.0, h]) - fn(xy - [0.0, h])) / (2.0 * h)
+    return np.stack([jx, jy], axis=-1)
+
+
+def sticker_observations(track: Track, camera: CameraModel | None, plane: Plane | None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each sticker's centroid, second moments and area in the frame of the track's positions.
+
+    The moments and areas are measured in the recorded picture; the positions are the ideal
+    image's (a lens model given) or the plane's: the moments are carried there by the local
+    Jacobian of the lens's inverse (and of the plane's map), ``M → J·M·Jᵀ``, areas by ``|det J|``.
+
+    Returns
+    -------
+    lead_xy, trail_xy : ndarray, shape (n, 2)
+    lead_moments, trail_moments : ndarray, shape (n, 2, 2)
+    lead_area, trail_area : ndarray, shape (n,)
+    """
+    out = []
+    for xy, shape, area in ((track.lead_xy_px, track.lead_shape_px2, track.lead_area_px),
+                            (track.trail_xy_px, track.trail_shape_px2, track.trail_area_px)):
+        m = _moments(shape)
+        a = np.asarray(area, dtype=np.float64).copy()
+        ideal = plane.from_rectified(xy) if plane is not None else np.asarray(xy, dtype=np.float64)
+        good = np.all(np.isfinite(ideal), axis=1)
+        jac = np.tile(np.eye(2), (len(a), 1, 1))
+        if camera is not None and camera.has_distortion and good.any():
+            recorded = camera.distort_points(ideal[good])
+            jac[good] = _jacobian(lambda p: camera.undistort_points(p)[0], recorded)
+        if plane is not None and good.any():
+            jac[good] = plane.rectified_jacobian(ideal[good]) @ jac[good]
+        m = jac @ m @ np.swapaxes(jac, -1, -2)
+        a = a * np.abs(np.linalg.det(jac))
+        out.append((np.asarray(xy, dtype=np.float64), m, a))
+    (lx, lm, la), (tx, tm, ta) = out
+    return lx, tx, lm, tm, la, ta
+
+
+def pooled_view(tracks: list[Track], camera: CameraModel | None = None, plane: Plane | None = None) -> ObliqueView | None:
+    """The view told by every valid frame of ``tracks`` together (one camera set-up).
 
     Parameters
     ----------
     tracks : list of Track
+    camera : CameraModel, optional
+        The lens model the tracks were made with (their shapes are the recorded picture's).
+    plane : Plane, optional
+        The plane the tracks were measured in: the view is then the plane's residual one.
 
     Returns
     -------
     ObliqueView or None
-        None with too few valid frames.
+        None with too few sharp frames.
     """
     if not tracks:
         return None
-    lead = np.concatenate([t.lead_xy_px for t in tracks])
-    trail = np.concatenate([t.trail_xy_px for t in tracks])
+    camera = camera if camera is not None else (plane.camera if plane is not None else None)
+    parts = [sticker_observations(t, camera, plane) for t in tracks]
+    lead, trail, lm, tm, la, ta = (np.concatenate([p[k] for p in parts]) for k in range(6))
     valid = np.concatenate([t.valid for t in tracks])
-    lead_area = np.concatenate([t.lead_area_px for t in tracks])
-    trail_area = np.concatenate([t.trail_area_px for t in tracks])
     segment = np.concatenate([np.full(t.n_frames, k) for k, t in enumerate(tracks)])
-    return oblique_view(lead, trail, valid, lead_area_px=lead_area, trail_area_px=trail_area, segment=segment)
+    centre = _principal_point(tracks[0], camera, plane)
+    return oblique_view(lead, trail, lm, tm, la, ta, valid, segment=segment, centre_px=centre)
+
+
+def _principal_point(track: Track, camera: CameraModel | None, plane: Plane | None) -> tuple[float, float] | None:
+    """The principal point in the track's frame: the calibration's, else the picture's centre; None unknown."""
+    if camera is not None:
+        c = np.array([[camera.camera_matrix[0, 2], camera.camera_matrix[1, 2]]])
+    elif plane is not None:
+        c = np.array([[(plane.image_size[0] - 1) / 2.0, (plane.image_size[1] - 1) / 2.0]])
+    elif track.snapshot_rgb is not None:
+        h, w = track.snapshot_rgb.shape[:2]
+        c = np.array([[(w - 1) / 2.0, (h - 1) / 2.0]])
+    else:
+        return None
+    if plane is not None:
+        c = plane.to_rectified(c)
+    return float(c[0, 0]), float(c[0, 1])
 
 
 def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = "") -> str | None:
@@ -64,8 +134,13 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
     where : str
         What to name the command after (``"servoscope plane board.jpg --board 9x6 --square 25"``).
     """
-    if view is None or not (view.view_angle_deg >= OBLIQUE_VIEW_WARNING_DEG
-                            and view.view_angle_ci95_deg[0] >= OBLIQUE_VIEW_LOWER_DEG):
+    if view is None:
+        return None
+    tilted = view.view_angle_deg >= OBLIQUE_VIEW_WARNING_DEG and view.view_angle_ci95_deg[0] > 0.0
+    lo, hi = view.angle_gain_ci95
+    # Perspective and foreshortening can cancel in the angles (not in the heave): either one warns.
+    scaled = min(abs(lo - 1.0), abs(hi - 1.0)) >= OBLIQUE_GAIN_WARNING and not lo <= 1.0 <= hi
+    if not (tilted or scaled):
         return None
     how = where or "servoscope plane BOARD_PHOTO --board COLSxROWS --square MM --out plane.json"
     if plane is None:
@@ -80,27 +155,30 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
             f"{abs(100.0 * (view.angle_gain - 1.0)):.1f} % {'small' if view.angle_gain < 1 else 'large'}")
 
 
-def _mapped(xy: np.ndarray, correction: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    return (xy - centre) @ correction.T + centre
+def _mapped(xy: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Points (…, 2) through a homography (NaN kept)."""
+    pts = np.asarray(xy, dtype=np.float64)
+    w = pts[..., 0] * h[2, 0] + pts[..., 1] * h[2, 1] + h[2, 2]
+    return np.stack([(pts[..., 0] * h[0, 0] + pts[..., 1] * h[0, 1] + h[0, 2]) / w,
+                     (pts[..., 0] * h[1, 0] + pts[..., 1] * h[1, 1] + h[1, 2]) / w], axis=-1)
 
 
-def with_view_correction(track: Track, view: ObliqueView, centre_xy_px: tuple[float, float]) -> Track:
-    """The track with its positions mapped by the view's affine correction, and its angles measured again.
+def with_view_correction(track: Track, view: ObliqueView) -> Track:
+    """The track with its positions mapped into the plane the stickers tell, and its angles measured again.
 
     Parameters
     ----------
     track : Track
     view : ObliqueView
-        The estimate whose :attr:`~ObliqueView.correction` is applied (determinant 1).
-    centre_xy_px : (float, float)
-        The point that stays put (the picture's centre).
+        The estimate whose :attr:`~ObliqueView.correction` (a homography into the plane's
+        rectified px) is applied.
 
     Returns
     -------
     Track
         Lead, trail and extra markers' positions mapped; the angle (less the reference
         line's motion where reference stickers took it off: that line is the image's), its
-        uncertainty and the bending measured again; ``plane`` says ``"self-calibrated (affine)"``.
+        uncertainty and the bending measured again; ``plane`` says :data:`SELF_CALIBRATED`.
 
     Raises
     ------
@@ -111,18 +189,16 @@ def with_view_correction(track: Track, view: ObliqueView, centre_xy_px: tuple[fl
         raise ServoscopeError(f"{track.video}: already measured in the plane {track.plane}: "
                               "the footage's own view correction is for footage without one")
     c = np.asarray(view.correction, dtype=np.float64)
-    centre = np.asarray(centre_xy_px, dtype=np.float64)
-    lead = _mapped(track.lead_xy_px, c, centre)
-    trail = _mapped(track.trail_xy_px, c, centre)
+    lead, trail = _mapped(track.lead_xy_px, c), _mapped(track.trail_xy_px, c)
     angle, sigma = blade_angle(lead, trail, track.valid, track.lead_sigma_px, track.trail_sigma_px)
     if track.reference_angle_rad is not None:
         angle = angle - np.nan_to_num(track.reference_angle_rad)
-        # Its uncertainty held both lines'; the correction (determinant 1) changes the blade's by a few %.
+        # Its uncertainty held both lines'; the correction (near a similarity) changes the blade's by a few %.
         sigma = np.where(track.valid, track.angle_sigma_rad, np.nan)
     changes: dict = {"lead_xy_px": lead, "trail_xy_px": trail, "angle_rad": np.where(track.valid, angle, np.nan),
                      "angle_sigma_rad": sigma, "plane": SELF_CALIBRATED, "plane_mm_per_px": None}
     if track.extra_xy_px is not None and track.bending_px is not None and track.valid.any():
-        extra = _mapped(track.extra_xy_px, c, centre)
+        extra = _mapped(track.extra_xy_px, c)
         points = np.concatenate([lead[:, None], trail[:, None], extra], axis=1)
         sig = np.concatenate([track.lead_sigma_px[:, None], track.trail_sigma_px[:, None], track.extra_sigma_px],
                              axis=1)
@@ -157,7 +233,7 @@ def campaign_in_view(campaign: Campaign, tracks: dict[str, Track], self_calibrat
         calibration, or the self-calibration's estimate), for the gain's interval.
     """
     ordered = [tracks[t.label] for t in campaign.tests if t.label in tracks]
-    view = pooled_view(ordered)
+    view = pooled_view(ordered, campaign.camera, campaign.plane)
     plane = campaign.plane
     if not self_calibrate:
         said = view_warning(view, plane=None if plane is None else (plane.source or "plane.json"))
@@ -170,21 +246,15 @@ def campaign_in_view(campaign: Campaign, tracks: dict[str, Track], self_calibrat
         raise ServoscopeError(f"{campaign.path}: [camera] plane is given: the footage's own view correction "
                               "(--self-calibrate-plane) is for footage without a plane; leave one of them out")
     if view is None or not view.determined:
-        swing = "too few frames" if view is None else (
-            f"a {view.swing_deg:.1f}° swing gives a view of {view.view_angle_deg:.0f}° "
-            f"(95 %: {view.view_angle_ci95_deg[0]:.0f}–{view.view_angle_ci95_deg[1]:.0f}°)")
-        raise ServoscopeError(f"{campaign.path}: the footage does not tell the camera's view ({swing}): the blade must "
-                              "turn further for a self-calibration; calibrate the plane with a board photo instead "
-                              "(servoscope plane)")
-    valid = np.concatenate([t.valid for t in ordered])
-    mids = np.concatenate([0.5 * (t.lead_xy_px + t.trail_xy_px) for t in ordered])[valid]
-    centre = tuple(float(v) for v in np.median(mids, axis=0))
-    corrected = {label: with_view_correction(t, view, centre) for label, t in tracks.items()}
+        raise ServoscopeError(f"{campaign.path}: the footage does not tell the camera's view ("
+                              f"{'too few sharp frames' if view is None else view.why}): calibrate the plane with a "
+                              "board photo instead (servoscope plane)")
+    corrected = {label: with_view_correction(t, view) for label, t in tracks.items()}
     lo, hi = view.angle_gain_ci95
     rel = (hi - lo) / (2.0 * 1.96) / view.angle_gain
-    warnings.insert(0, f"angles corrected for the camera's view as the footage tells it: {view.describe()}; the "
-                       "correction takes out the foreshortening, not the perspective (a board photo, "
-                       "servoscope plane, takes out both)")
+    warnings.insert(0, f"angles corrected for the camera's view as the stickers tell it: {view.describe()}; the "
+                       "correction rests on round or square stickers of one size (a board photo, servoscope plane, "
+                       "rests on nothing about them)")
     return corrected, view, (rel, "the view self-calibrated from the footage")
 
 

@@ -157,7 +157,7 @@ class IdentificationResult:
         few frames.
     plane : dict or None
         The plane the angles were measured in (its summary: file, view angle, reprojection
-        error, angle-gain uncertainty), ``{"source": "self-calibrated (affine)", …}`` after
+        error, angle-gain uncertainty), ``{"source": "self-calibrated (stickers' shapes)"}`` after
         ``self_calibrate_plane``; None: the image.
     """
 

@@ -29,12 +29,12 @@ def plane_section(result: "IdentificationResult", figures_dir: Path | None) -> R
     s = ReportSection("Camera view and the blade's plane", figures_dir=figures_dir)
     if plane is None:
         s.text("Angles measured in the picture (no [camera] plane): right for a camera that faces the blade's plane "
-               "square-on. A camera off square reads angles small or large (cos of the view angle across the blade); "
-               "the markers' separation over the blade's swing tells how far off square it looks (below).")
-    elif plane.get("source") == "self-calibrated (affine)":
-        s.text("Angles corrected for the camera's view as the markers' separation tells it (--self-calibrate-plane): "
-               "the foreshortening is taken out, the perspective is not; the gain's interval includes the "
-               "estimate's uncertainty.")
+               "square-on. A camera off square reads angles small or large (foreshortening, and perspective: the "
+               "nearer sticker moves more); the stickers' shapes and sizes tell how far off square it looks (below).")
+    elif str(plane.get("source", "")).startswith("self-calibrated"):
+        s.text("Angles corrected for the camera's view as the stickers' shapes and sizes tell it "
+               "(--self-calibrate-plane: foreshortening and perspective, resting on round or square stickers of one "
+               "size); the gain's interval includes the estimate's uncertainty.")
     else:
         s.text(f"Angles, separations, heave and bending measured in the blade's plane from {plane.get('source')} "
                "(servoscope plane: a chessboard held against the blade, photographed by the campaign's camera).")
@@ -51,7 +51,8 @@ def plane_section(result: "IdentificationResult", figures_dir: Path | None) -> R
         lo, hi = view.view_angle_ci95_deg
         glo, ghi = view.angle_gain_ci95
         where = "the picture" if plane is None else "the plane (a check of it: 0° when it is the blade's)"
-        s.text(f"The view the markers show in {where}, from the ellipse their separation draws as the blade turns "
+        s.text(f"The view the stickers show in {where}: a round or square sticker's image is the view's local "
+               "Jacobian, two of them a chord apart in many frames give its foreshortening and its perspective "
                "(docs/accuracy.md, \"Oblique views\"):")
         s.table(["view angle off square", "95 %", "angle gain (image / plane)", "95 %", "swing", "frames",
                  "told by the footage"],
