@@ -73,3 +73,15 @@ def test_cli_identify_json(tmp_path, quick_campaign, quick_result):
     # Same input, same output: the CLI run reproduces the in-process result exactly.
     assert printed["model"]["gain"] == quick_result.summary()["model"]["gain"]
     assert printed == json.loads((tmp_path / "o" / "result.json").read_text())
+
+
+def test_square_on_twin_is_not_warned_of_an_oblique_view(quick_campaign, quick_result):
+    # The twin films square-on: the stickers' shapes must say so (issue 27), within the estimate's
+    # measured systematic, and no warning may ask for a plane.
+    view = quick_result.view
+    assert view is not None and view.determined
+    assert view.view_angle_ci95_deg[0] == 0.0 and view.view_angle_deg < 8.0
+    assert view.angle_gain_ci95[0] <= 1.0 <= view.angle_gain_ci95[1]
+    assert not any("off square" in w for w in quick_result.warnings)
+    assert quick_result.summary()["view"]["determined"] is True
+    assert "plane" not in quick_result.summary()

@@ -134,8 +134,8 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
     where : str
         What to name the command after (``"servoscope plane board.jpg --board 9x6 --square 25"``).
     """
-    if view is None:
-        return None
+    if view is None or not view.determined:
+        return None  # stickers that are not round or square tell nothing of the view
     tilted = view.view_angle_deg >= OBLIQUE_VIEW_WARNING_DEG and view.view_angle_ci95_deg[0] > 0.0
     lo, hi = view.angle_gain_ci95
     # Perspective and foreshortening can cancel in the angles (not in the heave): either one warns.

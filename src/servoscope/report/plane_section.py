@@ -17,6 +17,36 @@ _VIEW_WARNINGS = ("the camera looks at the blade", "in the plane of", "angles co
                   "the gain's interval includes the angle scale's uncertainty")
 
 
+def _board_figure(plane) -> tuple[object, str] | None:
+    """The first board photo beside plane.json with its corners found again, and its name; None when not there."""
+    import cv2
+    import matplotlib.pyplot as plt
+
+    from ..camera.calibrate import detect_corners, refine_corners
+
+    if plane is None or not plane.views or not plane.source:
+        return None
+    name = plane.views[0].name.split("#")[0]
+    photo = Path(plane.source).parent / name
+    bgr = cv2.imread(str(photo), cv2.IMREAD_COLOR) if photo.is_file() else None
+    if bgr is None:
+        return None
+    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    corners = detect_corners(gray, tuple(plane.board), fast=False)
+    if corners is None:
+        return None
+    corners = refine_corners(gray, corners, tuple(plane.board)).reshape(-1, 2)
+    h, w = gray.shape
+    fig, ax = plt.subplots(figsize=(7.5, 7.5 * h / w + 0.4))
+    ax.imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), interpolation="nearest")
+    ax.plot(corners[:, 0], corners[:, 1], "+", color="#d62728", ms=7, mew=1.2)
+    ax.plot(corners[[0, plane.board[0] - 1], 0], corners[[0, plane.board[0] - 1], 1], "-", color="#17becf", lw=1.5)
+    ax.set_title(f"{name}: the board's {len(corners)} corners; the plane's view {plane.view_angle_deg:.1f}° off square")
+    ax.set_axis_off()
+    fig.tight_layout()
+    return fig, name
+
+
 def _num(value, fmt: str) -> str:
     return "—" if value is None else format(value, fmt)
 
@@ -47,6 +77,10 @@ def plane_section(result: "IdentificationResult", figures_dir: Path | None) -> R
                   plane.get("n_views"),
                   f"{_num(plane.get('rms_px'), '.3f')} px, {_num(plane.get('rms_mm'), '.3f')} mm",
                   f"{_num(None if plane.get('angle_gain_std') is None else 100.0 * plane['angle_gain_std'], '.2g')} %"]])
+        board = _board_figure(result.campaign.plane)
+        if board is not None:
+            s.figure(board[0], f"The board photo ({board[1]}) with its corners (red; the first row in cyan), found "
+                     "again as servoscope plane found them.", "Board photo with its corners", name="plane_board")
     if view is not None:
         lo, hi = view.view_angle_ci95_deg
         glo, ghi = view.angle_gain_ci95
