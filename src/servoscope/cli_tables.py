@@ -1,4 +1,4 @@
-"""The tables ``servoscope identify`` and ``servoscope demo`` print: the model, and the time-domain models.
+"""The tables ``servoscope identify``, ``demo`` and ``markers`` print: the model, the time-domain models, the blobs.
 
 Part of the command line (:mod:`servoscope.cli`), kept apart so that the commands stay a
 thin layer over the API.
@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import math
 
+from pathlib import Path
+
 import click
 
-__all__ = ["fmt", "print_blade_motions", "print_model", "print_servo_model"]
+__all__ = ["fmt", "print_blade_motions", "print_candidates", "print_model", "print_servo_model"]
 
 
 def print_model(result, truth: dict | None = None) -> None:
@@ -75,6 +77,12 @@ def print_model(result, truth: dict | None = None) -> None:
         print_servo_model(result, truth)
     if result.modes:
         print_blade_motions(result, truth)
+    if result.plane is not None:
+        # Which plane the angles are the plane's of: a board photo's, or the stickers' own estimate.
+        plane = result.plane
+        view = plane.get("view_angle_deg")
+        click.echo(f"angles measured in the blade's plane: {Path(str(plane.get('source'))).name}"
+                   + ("" if view is None else f" (the camera {view:.1f}° off square)"))
     # Warnings to stderr, as `track` does: the table on stdout stays what a script parses.
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
@@ -154,3 +162,38 @@ def fmt(value) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "—"
     return f"{value:.4g}"
+
+
+def print_candidates(title: str, rgb) -> list:
+    """``servoscope markers``' table of a frame's blobs, then how to pin one; returns the candidates.
+
+    Coloured blobs, or on a frame without colour (monochrome footage) the bright
+    blobs, which ``--lead bright@x,y`` pins.
+    """
+    from rich.console import Console
+    from rich.table import Table
+
+    from .markers.candidates import find_brightness_candidates, find_candidates, is_gray
+
+    gray = is_gray(rgb)
+    found = find_brightness_candidates(rgb) if gray else find_candidates(rgb)
+    table = Table(title=f"{title}: {'bright' if gray else 'coloured'} blobs")
+    for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)", "solidity", "at border"):
+        table.add_column(name, justify="right")
+    for c in found:
+        table.add_row(str(c.number), c.colour_hex, "—" if math.isnan(c.hue_deg) else f"{c.hue_deg:.0f}",
+                      f"{c.x_px:.1f}", f"{c.y_px:.1f}", str(c.area_px), f"{c.solidity:.2f}",
+                      "yes" if c.touches_border else "")
+    Console(highlight=False).print(table)
+    if not found:
+        click.echo("no bright blob found" if gray else "no saturated blob found", err=True)
+    elif gray:
+        click.echo("monochrome footage: markers are told by brightness; stickers are solid (>= 0.9), not at the "
+                   "border, and of like size; to choose one yourself, pin it with x, y from this table: track --lead "
+                   "bright@x,y, or in campaign.toml lead = {brightness = \"bright\", near = [x, y]}")
+    else:
+        # Stickers are solid (≥ 0.9), whole (not at the border) and alike in size; to make sure, pin them.
+        click.echo("stickers are solid (>= 0.9), not at the border, and of like size; to choose one yourself, pin it "
+                   "with its colour and x, y from this table: track --lead '#rrggbb@x,y', or in campaign.toml "
+                   "lead = {colour = \"#rrggbb\", near = [x, y]}")
+    return found

@@ -236,6 +236,36 @@ def _correction(theta: np.ndarray, c0: np.ndarray, s0: float, mid_px: np.ndarray
     return np.array([[lin[0, 0], lin[0, 1], t[0]], [lin[1, 0], lin[1, 1], t[1]], [0.0, 0.0, 1.0]]) @ g
 
 
+def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: np.ndarray, seen: np.ndarray,
+               where: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float], np.ndarray]:
+    """The view angle at ``where`` and the angle gain, each (value, 95 % low, high), from sampled parameters.
+
+    The fit's covariance is sampled (seeded); the measured systematics are added to the sampled
+    half-widths in quadrature. Also returns the Jacobian at ``where`` for every draw (the first
+    row the fit's own).
+    """
+    rng = np.random.default_rng(_SEED)
+    draws = np.vstack([theta[:4], rng.multivariate_normal(theta[:4], cov[:4, :4], size=_DRAWS, method="eigh")])
+    in_plane = _angles(draws, lead_n, trail_n)
+    span = float(np.ptp(seen))
+    gains = np.array([np.polyfit(row, seen, 1)[0] if span > 1e-4 else 1.0 for row in in_plane])
+    _, jmid = _map(draws[:, None, :], np.broadcast_to(where, (draws.shape[0], 1, 2)))
+    sv = np.linalg.svd(jmid[:, 0], compute_uv=False)
+    angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
+    a_lo, a_hi = (float(v) for v in np.percentile(angles[1:], [2.5, 97.5]))
+    a0 = float(angles[0])
+    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * VIEW_SYSTEMATIC_DEG)
+    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * VIEW_SYSTEMATIC_DEG)
+    if a_lo <= 0.0 or _square_on_within_95(theta[:4], cov[:4, :4]):
+        a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a square-on view is not excluded
+    g_lo, g_hi = (float(v) for v in np.percentile(gains[1:], [2.5, 97.5]))
+    g0 = float(gains[0])
+    sys_gain = GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
+    g_lo = g0 - math.hypot(g0 - g_lo, 1.96 * sys_gain)
+    g_hi = g0 + math.hypot(g_hi - g0, 1.96 * sys_gain)
+    return (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid
+
+
 def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_px2: np.ndarray,
                  trail_moments_px2: np.ndarray, lead_area_px: np.ndarray, trail_area_px: np.ndarray,
                  valid: np.ndarray, *, segment: np.ndarray | None = None,
@@ -308,29 +338,10 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
     jtj = sol.jac.T @ sol.jac
     dof = max(sol.fun.size - theta.size, 1)
     cov = np.linalg.pinv(jtj) * float(sol.fun @ sol.fun) / dof * inflation
-    lead_n, trail_n = norm(lead[idx]), norm(trail[idx])
     seen = np.unwrap(np.arctan2(trail[idx, 1] - lead[idx, 1], lead[idx, 0] - trail[idx, 0]))
-    rng = np.random.default_rng(_SEED)
-    draws = np.vstack([theta[:4], rng.multivariate_normal(theta[:4], cov[:4, :4], size=_DRAWS, method="eigh")])
-    in_plane = _angles(draws, lead_n, trail_n)
     span = float(np.ptp(seen))
-    gains = np.array([np.polyfit(row, seen, 1)[0] if span > 1e-4 else 1.0 for row in in_plane])
     where = norm(np.asarray(centre_px, dtype=np.float64)[None] if centre_px is not None else c0[None])[0]
-    _, jmid = _map(draws[:, None, :], np.broadcast_to(where, (draws.shape[0], 1, 2)))
-    sv = np.linalg.svd(jmid[:, 0], compute_uv=False)
-    angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
-    a_lo, a_hi = (float(v) for v in np.percentile(angles[1:], [2.5, 97.5]))
-    a0 = float(angles[0])
-    # The measured systematic added to the fit's own half-widths, in quadrature.
-    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * VIEW_SYSTEMATIC_DEG)
-    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * VIEW_SYSTEMATIC_DEG)
-    if a_lo <= 0.0 or _square_on_within_95(theta[:4], cov[:4, :4]):
-        a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a square-on view is not excluded
-    g_lo, g_hi = (float(v) for v in np.percentile(gains[1:], [2.5, 97.5]))
-    g0 = float(gains[0])
-    sys_gain = GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
-    g_lo = g0 - math.hypot(g0 - g_lo, 1.96 * sys_gain)
-    g_hi = g0 + math.hypot(g_hi - g0, 1.96 * sys_gain)
+    (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid = _intervals(theta, cov, norm(lead[idx]), norm(trail[idx]), seen, where)
     _, vecs = np.linalg.eigh(jmid[0, 0].T @ jmid[0, 0])
     axis = flip @ vecs[:, 1]  # the image direction the plane stretches most: the one the view shortened
     # Stickers that are not isotropic in the plane turn their anisotropy with the blade: it follows the angle.
@@ -341,7 +352,7 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
     why = (f"{k} sharp frames of both stickers (the stickers taken as round or square, one size)"
            if fine else "the stickers' shapes change with the blade's angle: not round or square stickers")
     return ObliqueView(
-        view_angle_deg=float(angles[0]),
+        view_angle_deg=a0,
         view_angle_ci95_deg=(a_lo, a_hi),
         axis_deg=float(np.degrees(np.arctan2(-axis[1], axis[0])) % 180.0),
         angle_gain=g0,

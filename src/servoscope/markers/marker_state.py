@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from .centroid import SoftCentroid, soft_centroid
+from ..camera.plane_map import area_scale_map
 from .colour import AUTO, BRIGHTNESS, BrightnessModel, ColourModel
 from .moments import Moments, weighted_moments
 from .settings import TrackerSettings
@@ -64,6 +65,9 @@ class MarkerTracker:
         self.hint: tuple[float, float] | None = None
         # The sticker's perimeter over that of a disk of its area: edge effects scale with it.
         self.edge_factor = 1.0
+        # An oblique view (a plane given) makes a sticker bigger where the plane is nearer: areas and
+        # axes are compared at the picture's centre's scale (None: square-on, nothing to undo).
+        self.area_scale = area_scale_map(settings.plane, settings.camera)
 
     # -- detection ---------------------------------------------------------
     def _components(self, rgb: np.ndarray, window: tuple[int, int, int, int]):
@@ -168,6 +172,15 @@ class MarkerTracker:
             return None
         return Blob(soft.moments, soft.sigma_px, self.flaw(soft))
 
+    def _as_at_centre(self, m) -> tuple[float, float, float]:
+        """The blob's axes and area as they would be at the picture's centre (an oblique view's scale undone)."""
+        a, b = m.axes_px
+        if self.area_scale is None:
+            return a, b, m.m00
+        s = self.area_scale(m.x_px, m.y_px)
+        r = math.sqrt(s)
+        return a * r, b * r, m.m00 * s
+
     def flaw(self, soft: SoftCentroid) -> str:
         """Why ``soft`` does not look like this marker whole (border, hidden, merged, misshapen); "" when it does."""
         if soft.at_border:
@@ -175,7 +188,7 @@ class MarkerTracker:
         if self.reference is None:
             return ""
         m00, major, minor = self.reference
-        a, b = soft.moments.axes_px
+        a, b, area = self._as_at_centre(soft.moments)
         # Motion blur stretches a moving sticker along its motion: up to (2·reach)²/12 px² more
         # variance along it (a box of the smear's length), its area unchanged. It may, not must:
         # the major axis is allowed anywhere from the still one to the most smeared.
@@ -184,7 +197,7 @@ class MarkerTracker:
         # proportion to perimeter / area ∝ 1 / radius: the tolerance is for a
         # 13 px radius sticker and grows for smaller ones.
         tol = self.tolerance * max(1.0, 13.0 / math.sqrt(m00 / math.pi)) * self.edge_factor
-        area_ratio = soft.moments.m00 / m00
+        area_ratio = area / m00
         if area_ratio < 1.0 - tol:
             return f"{self.name} marker partly hidden (area {100 * area_ratio:.0f} % of its reference)"
         # Upwards and in shape the codec's chroma bleed alone reaches a few
@@ -207,14 +220,14 @@ class MarkerTracker:
         if blob.flaw:
             return
         m = blob.moments
-        a, b = m.axes_px
+        a, b, area = self._as_at_centre(m)
         if self.reference is None:
-            self._ref.append((m.m00, a, b))
+            self._ref.append((area, a, b))
             if len(self._ref) >= self._REFERENCE_FRAMES:
                 self.reference = tuple(float(v) for v in np.median(np.asarray(self._ref), axis=0))  # type: ignore[assignment]
         else:
             # Slow drift (zoom, lighting) is followed; a sudden change is flagged.
-            self.reference = tuple(0.95 * r + 0.05 * v for r, v in zip(self.reference, (m.m00, a, b)))  # type: ignore[assignment]
+            self.reference = tuple(0.95 * r + 0.05 * v for r, v in zip(self.reference, (area, a, b)))  # type: ignore[assignment]
 
     def learn(self, rgb: np.ndarray, blob: Blob) -> None:
         """Learn colour and size from the first detection."""
