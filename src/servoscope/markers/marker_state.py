@@ -198,6 +198,12 @@ class MarkerTracker:
         # 13 px radius sticker and grows for smaller ones.
         tol = self.tolerance * max(1.0, 13.0 / math.sqrt(m00 / math.pi)) * self.edge_factor
         area_ratio = area / m00
+        k = math.sqrt(area_ratio)
+        if (not 1.0 - tol <= area_ratio <= 1.0 + 2.5 * tol and 0.8 < area_ratio < 1.25
+                and abs(a / (major * k) - 1.0) < 0.5 * tol and abs(b / (minor * k) - 1.0) < 0.5 * tol):
+            # Scaled whole, axes with area: an oblique view's perspective as the sticker moves nearer or
+            # farther (or a zoom), not a part hidden or merged, which changes one axis more than the other.
+            return ""
         if area_ratio < 1.0 - tol:
             return f"{self.name} marker partly hidden (area {100 * area_ratio:.0f} % of its reference)"
         # Upwards and in shape the codec's chroma bleed alone reaches a few
