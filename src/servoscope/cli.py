@@ -153,12 +153,15 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
     if fps is not None and exposure_s is None:
         # The preset's exposure is one interval of its own frame rate; keep it one interval of this one.
         given["exposure_s"] = 1.0 / fps
-    manifest = simulate_campaign(outdir, preset=preset, seed=seed, **{k: v for k, v in given.items() if v is not None})
-    click.echo(f"wrote {manifest}")
+    from ._io import staged_folder
+
+    with staged_folder(outdir, last=("campaign.toml",)) as stage:  # whole or not at all
+        manifest = simulate_campaign(stage, preset=preset, seed=seed, **{k: v for k, v in given.items() if v is not None})
+    click.echo(f"wrote {outdir / manifest.name}")
 
 
 def _frame_source_options(command):
-    """--fps, --start, --timestamps and --bayer: what an image sequence or a raw file is read with."""
+    """--fps, --start, --timestamps, --bayer and --bits: what an image sequence or a raw file is read with."""
     for option in reversed([
         click.option("--fps", type=float, help="Frame rate of an image sequence (frames/s); overrides a raw file's header."),
         click.option("--start", "start_s", type=float, default=0.0, show_default=True,
@@ -167,25 +170,28 @@ def _frame_source_options(command):
                      help="Text file with each frame's time (s), one per line, instead of --fps."),
         click.option("--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
                      help="Bayer pattern of raw (undemosaiced) frames."),
+        click.option("--bits", type=click.IntRange(1, 16),
+                     help="The samples' real bit depth where the files do not say it (12-bit frames in 16-bit TIFFs)."),
     ]):
         command = option(command)
     return command
 
 
-def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path | None, bayer: str | None):
+def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path | None, bayer: str | None,
+             bits: int | None = None):
     """What to read for VIDEO with the frame-source options: (path or source string, name, default CSV path)."""
     from .video.frame_source import frame_source, is_frame_source, source_name
 
-    given = fps is not None or start_s or timestamps is not None or bayer is not None
+    given = fps is not None or start_s or timestamps is not None or bayer is not None or bits is not None
     if not is_frame_source(video):
         if given:
-            raise ServoscopeError(f"{video}: --fps, --start, --timestamps and --bayer are for image sequences and "
+            raise ServoscopeError(f"{video}: --fps, --start, --timestamps, --bayer and --bits are for image sequences and "
                                   "raw files; a video's frame times come from its own timestamps")
         return video, video.name, video.with_name(video.stem + ".track.csv")
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise ServoscopeError(f"{video}: --fps must be > 0 frames/s, got {fps}")
     source = frame_source(video, fps=fps, start_s=start_s, timestamps=None if timestamps is None else timestamps.resolve(),
-                          bayer=None if bayer is None else bayer.upper())
+                          bayer=None if bayer is None else bayer.upper(), bits=bits)
     name = source_name(source)
     import glob
 
@@ -237,7 +243,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     (with --fps), or a Photron .mraw/.cihx or Phantom .cine file.
     """
     video, name, default_csv = _footage(video, **source)
-    from ._io import atomic_path
+    from ._io import staged_files
     from .camera import CameraModel
     from .markers import TrackerSettings, parse_colour, track_video
     from .markers.selection import parse_marker_spec
@@ -271,6 +277,8 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         raise ServoscopeError(f"--readout must be a time >= 0 in seconds, got {readout_s}")
     if overlay is not None and overlay.suffix.lower() not in (".mp4", ".mov"):
         raise ServoscopeError(f"--overlay {overlay}: must end in .mp4 or .mov")
+    if overlay is not None and overlay.resolve() == Path(str(video)).resolve():
+        raise ServoscopeError(f"--overlay {overlay}: would overwrite the footage itself; choose another file")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
                                lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
@@ -285,36 +293,21 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     if out_csv is None:
         out_csv = default_csv
     out_csv.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out_csv) as tmp:
-        result.to_csv(tmp)
-    s = result.summary()
-    t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
-    if result.t0_earliest_s is not None and result.led_partial_frames == 0:
-        t0 += f" (no frame partly lit: between {result.t0_earliest_s:.4f} and {result.t0_latest_s:.4f} s)"
-    sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
-    noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}° from pixel noise"
-    if s.get("angle_noise_measured_rad") is not None:
-        noise = f"{math.degrees(s['angle_noise_measured_rad']):.4f}° measured ({noise})"
-    if s.get("camera_shake_px"):
-        # The measured noise then comes from the markers' separation, which shake leaves alone.
-        noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
-    click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
-               f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
-    if result.bending_px is not None and result.n_valid:
-        # Each extra marker's bending: how far it moved across the lead–trail line (its columns in the CSV).
-        import numpy as np
+    if overlay is not None:
+        overlay.parent.mkdir(parents=True, exist_ok=True)
+    with staged_files(out_csv, overlay) as (tmp_csv, tmp_overlay):  # both written, or neither
+        result.to_csv(tmp_csv)
+        if overlay is not None:
+            from .video.overlay import write_overlay
 
-        spread = np.nanstd(result.bending_px[result.valid, 2:], axis=0)
-        click.echo(f"{name}: bending across the lead–trail line, RMS: " + ", ".join(
-            f"extra{k + 1} ({c}) {v:.3f} px" for k, (c, v) in enumerate(zip(result.extra_colours, spread))))
+            write_overlay(video, result, tmp_overlay, camera=camera, plane=plane)
+    from .cli_tables import print_track_counts
+
+    print_track_counts(name, result, out_csv)
     _say_frame_of_reference_and_shutter(name, result, exposure_s)
     for w in result.warnings:
         click.echo(f"warning: {w}", err=True)
     if overlay is not None:
-        from .video.overlay import write_overlay
-
-        overlay.parent.mkdir(parents=True, exist_ok=True)
-        write_overlay(video, result, overlay, camera=camera, plane=plane)
         click.echo(f"wrote {overlay}")
 
 
@@ -384,13 +377,12 @@ def info(footage: Path, as_json: bool, **source) -> None:
 @click.option("--out", "out_png", type=click.Path(dir_okay=False, path_type=Path), help="Picture with the candidates numbered (PNG).")
 @_frame_source_options
 def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> None:
-    """List the coloured blobs in a frame of VIDEO, to choose the marker colours."""
+    """List the coloured blobs (on monochrome footage: the bright ones) in a frame of VIDEO, to choose the markers."""
     video, name, _ = _footage(video, **source)
     import cv2
-    from rich.console import Console
-    from rich.table import Table
 
-    from .markers.candidates import draw_candidates, find_candidates
+    from .cli_tables import print_candidates
+    from .markers.candidates import draw_candidates
     from .video import iter_frames
 
     if frame_index < 0:
@@ -402,26 +394,15 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
             break
     if chosen is None:
         raise ServoscopeError(f"{video}: has no frame {frame_index}")
-    found = find_candidates(chosen.rgb)
-    table = Table(title=f"{name}, frame {frame_index} (t = {chosen.time_s:.3f} s): coloured blobs")
-    for name in ("#", "colour", "hue (deg)", "x (px)", "y (px)", "area (px)", "solidity", "at border"):
-        table.add_column(name, justify="right")
-    for c in found:
-        table.add_row(str(c.number), c.colour_hex, f"{c.hue_deg:.0f}", f"{c.x_px:.1f}", f"{c.y_px:.1f}", str(c.area_px),
-                      f"{c.solidity:.2f}", "yes" if c.touches_border else "")
-    Console(highlight=False).print(table)
-    if not found:
-        click.echo("no saturated blob found", err=True)
-    else:
-        # Stickers are solid (≥ 0.9), whole (not at the border) and alike in size; to make sure, pin them.
-        click.echo("stickers are solid (>= 0.9), not at the border, and of like size; to choose one yourself, pin it "
-                   "with its colour and x, y from this table: track --lead '#rrggbb@x,y', or in campaign.toml "
-                   "lead = {colour = \"#rrggbb\", near = [x, y]}")
+    found = print_candidates(f"{name}, frame {frame_index} (t = {chosen.time_s:.3f} s)", chosen.rgb)
     if out_png is not None:
+        from ._io import atomic_path
+
         out_png.parent.mkdir(parents=True, exist_ok=True)
         picture = draw_candidates(chosen.rgb, found)
-        if not cv2.imwrite(str(out_png), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR)):
-            raise ServoscopeError(f"{out_png}: cannot write the picture")
+        with atomic_path(out_png) as tmp:
+            if not cv2.imwrite(str(tmp), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR)):
+                raise ServoscopeError(f"{out_png}: cannot write the picture")
         click.echo(f"wrote {out_png}")
 
 
@@ -484,23 +465,28 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
         raise ServoscopeError(f"{campaign}: [camera] plane is given: --self-calibrate-plane is for footage without a "
                               "plane; leave one of them out")
     _check_out_dir(out_dir, manifest)
+    from ._io import staged_folder
+
     failures: dict[str, str] = {}
-    with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
-        tracks = track_campaign(
-            manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
-            workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache", force=force,
-        )
-    if failures:
-        manifest = manifest.without(failures)
-    result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
-                          fix=fix or None, bounds=bounds or None, nonlinear=nonlinear, ties=ties or None,
-                          self_calibrate_plane=self_calibrate_plane)
-    paths = write_report(result, out_dir)
+    # Built aside and moved into place whole (the track cache, .cache, is written in place and kept).
+    with staged_folder(out_dir, keep=(".cache",), last=("result.json",)) as stage:
+        with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+            tracks = track_campaign(
+                manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
+                workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache",
+                force=force,
+            )
+        if failures:
+            manifest = manifest.without(failures)
+        result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap,
+                              keep_going=keep_going, fix=fix or None, bounds=bounds or None, nonlinear=nonlinear,
+                              ties=ties or None, self_calibrate_plane=self_calibrate_plane)
+        write_report(result, stage)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     elif not quiet:
         print_model(result)
-        click.echo(f"report: {paths['report']}")
+        click.echo(f"report: {out_dir / 'report.html'}")
 
 
 def _parse_order(text: str):
@@ -541,20 +527,24 @@ def demo(out_dir: Path, preset: str, seed: int, quiet: bool) -> None:
     from .campaign import identify as run_identify
     from .campaign import load_campaign
     from .cli_tables import print_model
+    from ._io import staged_folder
     from .report import write_report
     from .simulate import simulate_campaign
 
     click.echo(f"rendering the '{preset}' campaign (digital twin) into {out_dir / 'campaign'} …")
-    manifest_path = simulate_campaign(out_dir / "campaign", preset=preset, seed=seed)
+    # Each folder whole or not at all: the campaign is in place before it is read (result.json names it).
+    with staged_folder(out_dir / "campaign", last=("campaign.toml",)) as stage:
+        manifest_path = out_dir / "campaign" / simulate_campaign(stage, preset=preset, seed=seed).name
     manifest = load_campaign(manifest_path)
     click.echo(f"tracking {len(manifest.tests)} videos and identifying …")
-    with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
-        result = run_identify(manifest, progress=progress)
-    paths = write_report(result, out_dir / "result")
+    with staged_folder(out_dir / "result", last=("result.json",)) as stage:
+        with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+            result = run_identify(manifest, progress=progress)
+        write_report(result, stage)
     truth = json.loads((manifest_path.parent / "truth.json").read_text())
     print_model(result, truth)
-    click.echo(f"report: {paths['report']}")
-    click.echo(f"result: {paths['result']}")
+    click.echo(f"report: {out_dir / 'result' / 'report.html'}")
+    click.echo(f"result: {out_dir / 'result' / 'result.json'}")
 
 
 @cli.command()

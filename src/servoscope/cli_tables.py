@@ -1,4 +1,5 @@
-"""The tables ``servoscope identify``, ``demo`` and ``markers`` print: the model, the time-domain models, the blobs.
+"""What ``servoscope identify``, ``demo``, ``markers`` and ``track`` print: the model, the time-domain models,
+the blobs, a track's counts.
 
 Part of the command line (:mod:`servoscope.cli`), kept apart so that the commands stay a
 thin layer over the API.
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import click
 
-__all__ = ["fmt", "print_blade_motions", "print_candidates", "print_model", "print_servo_model"]
+__all__ = ["fmt", "print_blade_motions", "print_candidates", "print_model", "print_servo_model",
+           "print_track_counts"]
 
 
 def print_model(result, truth: dict | None = None) -> None:
@@ -197,3 +199,27 @@ def print_candidates(title: str, rgb) -> list:
                    "with its colour and x, y from this table: track --lead '#rrggbb@x,y', or in campaign.toml "
                    "lead = {colour = \"#rrggbb\", near = [x, y]}")
     return found
+
+
+def print_track_counts(name: str, result, out_csv: Path) -> None:
+    """``servoscope track``'s first lines: frames, valid ones, separation, angle noise, t0, the CSV; the bending."""
+    s = result.summary()
+    t0 = "none" if result.t0_s is None else f"{result.t0_s:.4f} s ± {1e3 * (result.t0_uncertainty_s or 0.0):.2f} ms"
+    if result.t0_earliest_s is not None and result.led_partial_frames == 0:
+        t0 += f" (no frame partly lit: between {result.t0_earliest_s:.4f} and {result.t0_latest_s:.4f} s)"
+    sep = "n/a" if s["mean_separation_px"] is None else f"{s['mean_separation_px']:.1f} px"
+    noise = "n/a" if s["angle_noise_rad"] is None else f"{math.degrees(s['angle_noise_rad']):.4f}° from pixel noise"
+    if s.get("angle_noise_measured_rad") is not None:
+        noise = f"{math.degrees(s['angle_noise_measured_rad']):.4f}° measured ({noise})"
+    if s.get("camera_shake_px"):
+        # The measured noise then comes from the markers' separation, which shake leaves alone.
+        noise += f", camera shake {s['camera_shake_px']:.2f} px RMS"
+    click.echo(f"{name}: {result.n_frames} frames, {result.n_valid} valid ({100 * s['valid_fraction']:.1f} %), "
+               f"sticker separation {sep}, angle noise {noise}, LED switch t0 = {t0}; wrote {out_csv}")
+    if result.bending_px is not None and result.n_valid:
+        # Each extra marker's bending: how far it moved across the lead–trail line (its columns in the CSV).
+        import numpy as np
+
+        spread = np.nanstd(result.bending_px[result.valid, 2:], axis=0)
+        click.echo(f"{name}: bending across the lead–trail line, RMS: " + ", ".join(
+            f"extra{k + 1} ({c}) {v:.3f} px" for k, (c, v) in enumerate(zip(result.extra_colours, spread))))

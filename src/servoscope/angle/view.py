@@ -61,6 +61,12 @@ _MAX_FRAMES = 3000
 VIEW_SYSTEMATIC_DEG = 4.0
 GAIN_SYSTEMATIC = 0.003
 GAIN_SYSTEMATIC_FRACTION = 0.2
+#: The stickers' radius (px) those were measured at (17 and 26 px stickers read alike); a smaller
+#: sticker's moments carry more of the pixel grid's anisotropy (the monochrome twin's 12 px dots
+#: read 9–12° square-on): the two additive systematics grow as (this / radius)².
+SYSTEMATIC_RADIUS_PX = 8.7
+#: Frames the angle gain's slope is taken over, for each draw (draws × frames stay a few MB).
+_GAIN_FRAMES = 400
 #: Draws of the fitted parameters for the intervals (seeded: the same footage, the same answer).
 _DRAWS = 1000
 _SEED = 27
@@ -197,11 +203,16 @@ def _residuals(params: np.ndarray, x: np.ndarray, moments: np.ndarray, log_area:
                            (log_area + np.log(det) - params[4]) / scale[1]])
 
 
+def _points(theta: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``G(x)`` alone (no Jacobian: the draws × frames arrays stay small), parameters broadcast as in :func:`_map`."""
+    p, q, g1, g2 = theta[..., 0], theta[..., 1], theta[..., 2], theta[..., 3]
+    w = 1.0 + g1 * x[..., 0] + g2 * x[..., 1]
+    return np.stack([(p * x[..., 0] + q * x[..., 1]) / w, x[..., 1] / w], axis=-1)
+
+
 def _angles(theta: np.ndarray, lead_n: np.ndarray, trail_n: np.ndarray) -> np.ndarray:
     """The blade's angle in the plane for each parameter row (d, 4) and frame (n): shape (d, n)."""
-    gl, _ = _map(theta[:, None, :], np.broadcast_to(lead_n, (theta.shape[0],) + lead_n.shape))
-    gt, _ = _map(theta[:, None, :], np.broadcast_to(trail_n, (theta.shape[0],) + trail_n.shape))
-    d = gl - gt
+    d = _points(theta[:, None, :], lead_n[None]) - _points(theta[:, None, :], trail_n[None])
     return np.unwrap(np.arctan2(d[..., 1], d[..., 0]), axis=-1)  # y up in the normalised frame
 
 
@@ -237,15 +248,19 @@ def _correction(theta: np.ndarray, c0: np.ndarray, s0: float, mid_px: np.ndarray
 
 
 def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: np.ndarray, seen: np.ndarray,
-               where: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float], np.ndarray]:
+               where: np.ndarray, small: float = 1.0
+               ) -> tuple[tuple[float, float, float], tuple[float, float, float], np.ndarray]:
     """The view angle at ``where`` and the angle gain, each (value, 95 % low, high), from sampled parameters.
 
     The fit's covariance is sampled (seeded); the measured systematics are added to the sampled
-    half-widths in quadrature. Also returns the Jacobian at ``where`` for every draw (the first
-    row the fit's own).
+    half-widths in quadrature (``small`` times the additive ones: small stickers). Also returns the
+    Jacobian at ``where`` for every draw (the first row the fit's own).
     """
     rng = np.random.default_rng(_SEED)
     draws = np.vstack([theta[:4], rng.multivariate_normal(theta[:4], cov[:4, :4], size=_DRAWS, method="eigh")])
+    # The gain is a slope over the swing: a few hundred frames spread over it tell it as well as all.
+    pick = np.linspace(0, len(seen) - 1, min(len(seen), _GAIN_FRAMES)).astype(int)
+    lead_n, trail_n, seen = lead_n[pick], trail_n[pick], seen[pick]
     in_plane = _angles(draws, lead_n, trail_n)
     span = float(np.ptp(seen))
     gains = np.array([np.polyfit(row, seen, 1)[0] if span > 1e-4 else 1.0 for row in in_plane])
@@ -254,13 +269,13 @@ def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: 
     angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
     a_lo, a_hi = (float(v) for v in np.percentile(angles[1:], [2.5, 97.5]))
     a0 = float(angles[0])
-    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * VIEW_SYSTEMATIC_DEG)
-    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * VIEW_SYSTEMATIC_DEG)
+    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * small * VIEW_SYSTEMATIC_DEG)
+    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * small * VIEW_SYSTEMATIC_DEG)
     if a_lo <= 0.0 or _square_on_within_95(theta[:4], cov[:4, :4]):
         a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a square-on view is not excluded
     g_lo, g_hi = (float(v) for v in np.percentile(gains[1:], [2.5, 97.5]))
     g0 = float(gains[0])
-    sys_gain = GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
+    sys_gain = small * GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
     g_lo = g0 - math.hypot(g0 - g_lo, 1.96 * sys_gain)
     g_hi = g0 + math.hypot(g_hi - g0, 1.96 * sys_gain)
     return (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid
@@ -341,7 +356,10 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
     seen = np.unwrap(np.arctan2(trail[idx, 1] - lead[idx, 1], lead[idx, 0] - trail[idx, 0]))
     span = float(np.ptp(seen))
     where = norm(np.asarray(centre_px, dtype=np.float64)[None] if centre_px is not None else c0[None])[0]
-    (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid = _intervals(theta, cov, norm(lead[idx]), norm(trail[idx]), seen, where)
+    radius = math.sqrt(float(np.median(np.concatenate([area[0][idx], area[1][idx]]))) / math.pi)
+    small = max(1.0, (SYSTEMATIC_RADIUS_PX / radius) ** 2)
+    (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid = _intervals(theta, cov, norm(lead[idx]), norm(trail[idx]), seen, where,
+                                                          small)
     _, vecs = np.linalg.eigh(jmid[0, 0].T @ jmid[0, 0])
     axis = flip @ vecs[:, 1]  # the image direction the plane stretches most: the one the view shortened
     # Stickers that are not isotropic in the plane turn their anisotropy with the blade: it follows the angle.

@@ -223,6 +223,20 @@ def _extra_markers(markers_t: dict, colours: dict, reference, problems) -> tuple
     return tuple(str(c) for c in extra)
 
 
+def _camera_file(problems: "_Problems", camera_t: dict, base: Path, key: str, load, hint: str):
+    """``[camera] key = "file"`` read with ``load``; None (and a problem said) when absent or bad."""
+    if key not in camera_t:
+        return None
+    if not isinstance(camera_t[key], str):
+        problems.add(f"camera.{key}", f"must be a file name{hint}")
+        return None
+    try:
+        return load(base / camera_t[key])
+    except ServoscopeError as exc:
+        problems.add(f"camera.{key}", str(exc))
+        return None
+
+
 def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bool = False) -> Campaign:
     """Read and validate ``campaign.toml``.
 
@@ -265,25 +279,9 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
 
     camera_t = problems.table(data, "camera")
     problems.unknown("camera", camera_t.keys(), _CAMERA_KEYS)
-    camera = None
-    if "calibration" in camera_t:
-        if not isinstance(camera_t["calibration"], str):
-            problems.add("camera.calibration", "must be a file name")
-        else:
-            try:
-                camera = CameraModel.load(base / camera_t["calibration"])
-            except ServoscopeError as exc:
-                problems.add("camera.calibration", str(exc))
-    plane = None
-    if "plane" in camera_t:
-        # The blade's plane from a board photo (servoscope plane): angles measured in it.
-        if not isinstance(camera_t["plane"], str):
-            problems.add("camera.plane", "must be a file name (plane.json, from `servoscope plane`)")
-        else:
-            try:
-                plane = Plane.load(base / camera_t["plane"])
-            except ServoscopeError as exc:
-                problems.add("camera.plane", str(exc))
+    camera = _camera_file(problems, camera_t, base, "calibration", CameraModel.load, "")
+    # The blade's plane from a board photo (servoscope plane): angles measured in it.
+    plane = _camera_file(problems, camera_t, base, "plane", Plane.load, " (plane.json, from `servoscope plane`)")
     exposure = None
     if "exposure_s" in camera_t:
         exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import ServoscopeError
 
 __all__ = ["AUTO", "BRIGHT", "BRIGHTNESS", "DARK", "BrightnessModel", "parse_colour", "ColourModel", "hsv_of_rgb",
-           "luma_bt601", "ycbcr_bt601"]
+           "luma_bt601", "seed_model", "ycbcr_bt601"]
 
 AUTO = "auto"
 #: Markers told by brightness rather than colour (monochrome footage): white dots on a dark
@@ -194,3 +194,24 @@ class BrightnessModel:
         """Binary membership of RGB pixels, shape (..., 3) → (...) bool."""
         y = luma_bt601(rgb)
         return y >= self.threshold_dn if self.bright else y <= self.threshold_dn
+
+
+def seed_model(spec, frame_rgb: np.ndarray) -> ColourModel | BrightnessModel:
+    """The first model of a marker given as ``spec`` (a parsed colour or a brightness), for ``frame_rgb``.
+
+    A colour seeds a permissive :class:`ColourModel`; ``"bright"`` or ``"dark"`` a
+    :class:`BrightnessModel` whose threshold comes from the frame's own levels
+    (what the tracker does on a monochrome video's first frame). Whatever takes a
+    marker's spec (the report's segmentation, the rolling shutter's LED row) goes
+    through here, so that no caller treats a brightness as a colour.
+
+    Raises
+    ------
+    ServoscopeError
+        For ``"auto"``, which has no model until the markers are found.
+    """
+    if isinstance(spec, str):
+        if spec in BRIGHTNESS:
+            return BrightnessModel.from_frame(frame_rgb, spec)
+        raise ServoscopeError(f"marker {spec!r}: not a colour or a brightness to segment by")
+    return ColourModel.from_seed(spec)

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from ..video.reader import VideoInfo
-from .colour import ColourModel
+from .colour import ColourModel, seed_model
 from .led_timing import frame_period_s, led_switch_time
 from .marker_state import Blob
 from .moments import Moments
@@ -98,8 +98,8 @@ def disk_peak(Y, cx: float, cy: float, r: float) -> float:
 
 
 def led_row_px(rgb: np.ndarray, led_spec, info: VideoInfo) -> float | None:
-    """Row (stored picture, px) of the largest lit-LED-coloured blob in ``rgb``; None when there is none."""
-    model = ColourModel.from_seed(led_spec)
+    """Row (stored picture, px) of the largest lit-LED-coloured (or bright, or dark) blob in ``rgb``; None when there is none."""
+    model = seed_model(led_spec, rgb)
     mask = model.mask(rgb).astype(np.uint8)
     n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n <= 1:

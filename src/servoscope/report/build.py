@@ -298,7 +298,7 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         )
         segmentation = _segmentation(result, track, lead, trail)
         if segmentation is not None:
-            s.figure(segmentation, "Pixels within each marker's colour band (before the soft, subpixel weighting), and each marker zoomed with its centroid.", "Segmentation", name="segmentation")
+            s.figure(segmentation, "Pixels within each marker's colour band, or past its brightness threshold on monochrome footage (before the soft, subpixel weighting), and each marker zoomed with its centroid.", "Segmentation", name="segmentation")
         from ..markers.error_analysis import angle_error_analysis, plot_angle_error
 
         analysis = angle_error_analysis(track)
@@ -485,15 +485,18 @@ def _blade_frame(result: "IdentificationResult", modes):
 
 
 def _segmentation(result: "IdentificationResult", track, lead, trail):
-    from ..markers.colour import AUTO, ColourModel, parse_colour
+    from ..markers.colour import AUTO, parse_colour, seed_model
     from .figures import segmentation_figure
 
     specs = {"lead": parse_colour(result.campaign.lead), "trail": parse_colour(result.campaign.trail)}
     if AUTO in specs.values():
         return None
     frame = track.snapshot_rgb
-    masks = {name: ColourModel.from_seed(spec).mask(frame) for name, spec in specs.items()}
-    return segmentation_figure(frame, masks, specs, {"lead": lead, "trail": trail})
+    # A colour's band, or a brightness marker's threshold from the frame's levels (monochrome footage).
+    models = {name: seed_model(spec, frame) for name, spec in specs.items()}
+    masks = {name: model.mask(frame) for name, model in models.items()}
+    return segmentation_figure(frame, masks, {name: model.rgb for name, model in models.items()},
+                               {"lead": lead, "trail": trail})
 
 
 def fit_t0(result: "IdentificationResult", label: str) -> float | None:
