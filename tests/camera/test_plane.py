@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from servoscope.camera import CameraModel, Plane, calibrate_plane, fit_plane
-from servoscope.camera.calibrate import detect_corners, refine_corners
+from servoscope.camera.calibrate import detect_corners
+from servoscope.camera.plane import refine_plane_corners
 from servoscope.cli import main
 from servoscope.errors import ServoscopeError
 
@@ -93,7 +94,7 @@ def test_each_photo_fits_no_worse_than_opencv_findhomography(photo):
     path = CHESSBOARD / photo
     plane = calibrate_plane(path, BOARD, square_mm=25.0)
     gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    corners = refine_corners(gray, detect_corners(gray, BOARD, fast=False), BOARD).reshape(-1, 2).astype(float)
+    corners = refine_plane_corners(gray, detect_corners(gray, BOARD, fast=False), BOARD).reshape(-1, 2).astype(float)
     board = 25.0 * np.mgrid[0:9, 0:6].T.reshape(-1, 2).astype(float)
     g, _ = cv2.findHomography(board, corners, 0)
     opencv_rms = np.sqrt(np.mean(np.sum((cv2.perspectiveTransform(board[None], g)[0] - corners) ** 2, axis=1)))

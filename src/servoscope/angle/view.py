@@ -194,7 +194,13 @@ def _map(theta: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _residuals(params: np.ndarray, x: np.ndarray, moments: np.ndarray, log_area: np.ndarray,
                scale: np.ndarray) -> np.ndarray:
-    """Per observation: the anisotropy of the sticker in the plane (2) and its log area less the common one."""
+    """Per observation: the anisotropy of the sticker in the plane (2) and its log area less the common one.
+
+    (The tracker's soft membership adds about 1 px² of isotropic spread in the recorded picture,
+    which an oblique view turns anisotropic in the plane; fitted as a parameter it traded with the
+    view's own anisotropy and doubled a square-on camera's reading, 4° to 8°: it is left to the
+    systematics.)
+    """
     _, jac = _map(params[:4], x)
     m = jac @ moments @ np.swapaxes(jac, -1, -2)
     tr = m[:, 0, 0] + m[:, 1, 1]
@@ -284,7 +290,8 @@ def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: 
 def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_px2: np.ndarray,
                  trail_moments_px2: np.ndarray, lead_area_px: np.ndarray, trail_area_px: np.ndarray,
                  valid: np.ndarray, *, segment: np.ndarray | None = None,
-                 centre_px: tuple[float, float] | None = None) -> ObliqueView | None:
+                 centre_px: tuple[float, float] | None = None, lead_to_frame: np.ndarray | None = None,
+                 trail_to_frame: np.ndarray | None = None) -> ObliqueView | None:
     """Estimate the camera's view of the blade's plane from the stickers' shapes and sizes.
 
     Parameters
@@ -292,13 +299,17 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
     lead_xy_px, trail_xy_px : ndarray, shape (n, 2)
         Centroids, in the frame the moments are given in (y down).
     lead_moments_px2, trail_moments_px2 : ndarray, shape (n, 2, 2)
-        Each sticker's central second moments over its area (px²), in that frame.
+        Each sticker's central second moments over its area (px²), as the tracker measured them
+        in the recorded picture.
     lead_area_px, trail_area_px : ndarray, shape (n,)
         Their areas (px²), in that frame.
     valid : ndarray of bool, shape (n,)
     segment : ndarray of int, shape (n,), optional
         Which recording each frame comes from (several tracks pooled): neighbours and the
         residuals' correlation are taken within a recording only.
+    lead_to_frame, trail_to_frame : ndarray, shape (n, 2, 2), optional
+        The local Jacobian from the recorded picture to the centroids' frame at each sticker
+        (the lens's inverse, the plane's map); None: the identity.
     centre_px : (float, float), optional
         The principal point (the picture's centre when no calibration says otherwise), in the
         centroids' frame: the view angle is the one there (the optical axis's with the plane's
@@ -334,7 +345,10 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
         return ((xy - c0) / s0) * np.array([1.0, -1.0])
 
     x = np.concatenate([norm(lead[idx]), norm(trail[idx])])
-    moments = np.concatenate([flip @ mom[0][idx] @ flip, flip @ mom[1][idx] @ flip])
+    to = [np.tile(np.eye(2), (n, 1, 1)) if t is None else np.asarray(t, dtype=np.float64).reshape(-1, 2, 2)
+          for t in (lead_to_frame, trail_to_frame)]
+    # The moments carried into the positions' frame, y up.
+    moments = np.concatenate([flip @ t[idx] @ m[idx] @ np.swapaxes(t[idx], -1, -2) @ flip for m, t in zip(mom, to)])
     log_area = np.log(np.concatenate([area[0][idx], area[1][idx]]))
     start = np.array([1.0, 0.0, 0.0, 0.0, float(np.mean(log_area))])
     scale = np.ones(2)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
+import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
@@ -34,7 +35,7 @@ from .model import CameraModel
 from .plane_fit import (HomographyFit, angle_gain_std, apply_homography, fit_consensus, fit_homography,
                         homography_jacobian, image_to_plane, rectifying_map, view_angles)
 
-__all__ = ["Plane", "PlaneView", "calibrate_plane", "fit_plane"]
+__all__ = ["Plane", "PlaneView", "calibrate_plane", "fit_plane", "refine_plane_corners"]
 
 #: plane.json's ``format`` and ``version``.
 FORMAT = "servoscope-plane"
@@ -45,6 +46,10 @@ MAX_RMS_PX = 2.0
 BOOTSTRAP_DRAWS = 200
 BOOTSTRAP_SEED = 20240615
 VIEW_ANGLE_SOURCES = ("calibration", "homography", "affine")
+#: Corners are refined on the photo smoothed by a Gaussian of this σ per px of corner spacing, at most
+#: ``MAX_SMOOTHING_PX`` (see :func:`refine_plane_corners`).
+SMOOTHING_PER_SPACING = 0.12
+MAX_SMOOTHING_PX = 2.0
 
 
 @dataclass(frozen=True)
@@ -442,7 +447,7 @@ def calibrate_plane(
             if found is None:
                 skipped.append((name, no_board))
             else:
-                corners.append(refine_corners(gray, found, board))
+                corners.append(refine_plane_corners(gray, found, board))
                 names.append(name)
         else:
             frames, missed = _video_corners(path, board, max_video_frames, sizes, camera)
@@ -461,6 +466,40 @@ def calibrate_plane(
 # -- helpers ------------------------------------------------------------------------
 
 
+def refine_plane_corners(gray: np.ndarray, corners: np.ndarray, board: tuple[int, int]) -> np.ndarray:
+    """Sub-pixel corners for the plane: :func:`~servoscope.camera.calibrate.refine_corners` on the photo smoothed.
+
+    :func:`cv2.cornerSubPix` on a sharp photo is *pixel-locked*: each corner is pulled
+    towards the nearest half pixel, by up to 0.08 px where its sub-pixel phase is a quarter
+    (measured on the twin's exactly rendered boards). Across a board seen off square the
+    phase drifts smoothly, so the errors of neighbouring corners agree, the homography
+    absorbs them and its fit's residuals do not show them: at 30° they turned every angle
+    measured in the plane 0.046 % small while ``angle_gain_std`` said 0.010 %. A Gaussian
+    of σ = 0.12 × the smallest corner spacing (at most 2 px) first takes most of the
+    locking out (0.08 → 0.012 px RMS; the angle gain 0.046 → 0.005 %) and leaves a
+    photo's own blur and a corner's position as they were (a point-symmetric pattern stays
+    point-symmetric about its corner).
+
+    Parameters
+    ----------
+    gray : ndarray (h, w)
+        The photo, gray.
+    corners : ndarray (n, 1, 2)
+        The detector's corners.
+    board : (int, int)
+        Inner corners (cols, rows).
+
+    Returns
+    -------
+    ndarray (n, 1, 2) float32
+    """
+    g = np.asarray(corners, dtype=np.float64).reshape(board[1], board[0], 2)
+    spacing = min(float(np.hypot(*np.diff(g, axis=a).reshape(-1, 2).T).min()) for a in (0, 1))
+    sigma = min(MAX_SMOOTHING_PX, SMOOTHING_PER_SPACING * spacing)
+    smooth = cv2.GaussianBlur(np.asarray(gray, dtype=np.float32), (0, 0), sigma)
+    return refine_corners(smooth, corners, board)
+
+
 def _video_corners(path: Path, board: tuple[int, int], k: int, sizes: dict, camera: CameraModel | None
                    ) -> tuple[list[tuple[int, np.ndarray]], tuple[int, int] | None]:
     """Refined corners of up to ``k`` frames spread through those with the board; (missed, sampled) or None.
@@ -476,7 +515,7 @@ def _video_corners(path: Path, board: tuple[int, int], k: int, sizes: dict, came
         _check_size(path, gray.shape, sizes, camera)
         corners = detect_corners(gray, board, fast=True)
         if corners is not None:
-            found.append((index, refine_corners(gray, corners, board)))
+            found.append((index, refine_plane_corners(gray, corners, board)))
     picks = np.unique(np.round(np.linspace(0, len(found) - 1, min(len(found), k))).astype(int)) if found else []
     missed = sampled - len(found)
     return [found[i] for i in picks], ((missed, sampled) if missed else None)

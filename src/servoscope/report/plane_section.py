@@ -22,7 +22,8 @@ def _board_figure(plane) -> tuple[object, str] | None:
     import cv2
     import matplotlib.pyplot as plt
 
-    from ..camera.calibrate import detect_corners, refine_corners
+    from ..camera.calibrate import detect_corners
+    from ..camera.plane import refine_plane_corners
 
     if plane is None or not plane.views or not plane.source:
         return None
@@ -35,7 +36,7 @@ def _board_figure(plane) -> tuple[object, str] | None:
     corners = detect_corners(gray, tuple(plane.board), fast=False)
     if corners is None:
         return None
-    corners = refine_corners(gray, corners, tuple(plane.board)).reshape(-1, 2)
+    corners = refine_plane_corners(gray, corners, tuple(plane.board)).reshape(-1, 2)  # as servoscope plane found them
     h, w = gray.shape
     fig, ax = plt.subplots(figsize=(7.5, 7.5 * h / w + 0.4))
     ax.imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), interpolation="nearest")
@@ -81,10 +82,10 @@ def plane_section(result: "IdentificationResult", figures_dir: Path | None) -> R
         if board is not None:
             s.figure(board[0], f"The board photo ({board[1]}) with its corners (red; the first row in cyan), found "
                      "again as servoscope plane found them.", "Board photo with its corners", name="plane_board")
-    if view is not None:
+    if view is not None and plane is None:
         lo, hi = view.view_angle_ci95_deg
         glo, ghi = view.angle_gain_ci95
-        where = "the picture" if plane is None else "the plane (a check of it: 0° when it is the blade's)"
+        where = "the picture"
         s.text(f"The view the stickers show in {where}: a round or square sticker's image is the view's local "
                "Jacobian, two of them a chord apart in many frames give its foreshortening and its perspective "
                "(docs/accuracy.md, \"Oblique views\"):")
