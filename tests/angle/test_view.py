@@ -66,7 +66,8 @@ def _filmed(yaw_deg: float, tilt_deg: float, swing_deg: float, *, noise_px: floa
     lm = 0.5 * (lm + np.swapaxes(lm, -1, -2))
     tm = 0.5 * (tm + np.swapaxes(tm, -1, -2))
     seen = np.unwrap(np.arctan2(trail[:, 1] - lead[:, 1], lead[:, 0] - trail[:, 0]))
-    true_gain = np.polyfit(theta, seen, 1)[0]
+    # The gain where the blade spends its time: the slope at its median angle (perspective bends the relation).
+    true_gain = np.polyfit(theta - np.median(theta), seen, 2)[1]
     view_deg = math.degrees(math.acos(math.cos(yaw) * math.cos(tilt)))
     return lead, trail, lm, tm, la, ta, true_gain, view_deg
 
@@ -103,7 +104,7 @@ def test_the_correction_gives_the_planes_angles():
     pts = cv2.perspectiveTransform(np.stack([lead, trail], axis=1).reshape(-1, 1, 2), h).reshape(-1, 2, 2)
     corrected = np.unwrap(np.arctan2(pts[:, 1, 1] - pts[:, 0, 1], pts[:, 0, 0] - pts[:, 1, 0]))
     seen = np.unwrap(np.arctan2(trail[:, 1] - lead[:, 1], lead[:, 0] - trail[:, 0]))
-    assert np.polyfit(seen, corrected, 1)[0] == pytest.approx(1.0 / view.angle_gain, rel=1e-3)
+    assert np.polyfit(seen - np.median(seen), corrected, 2)[1] == pytest.approx(1.0 / view.angle_gain, rel=1e-3)
     # The blade's midpoint stays put, and so does the picture's scale there.
     mid = np.median(0.5 * (lead + trail), axis=0)
     assert np.allclose(cv2.perspectiveTransform(mid.reshape(1, 1, 2), h).ravel(), mid, atol=0.5)

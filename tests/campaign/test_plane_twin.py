@@ -170,3 +170,39 @@ def test_a_plane_of_another_camera_is_refused(oblique, tmp_path, capsys):
     out_dir = tmp_path / "res"
     _refused(capsys, tmp_path, ["identify", other, "--out", out_dir, "--workers", 1, "--quiet"],
              "made with another camera calibration", out_dir)
+
+
+def test_without_the_plane_the_stickers_warn_with_the_view_and_the_gain_error(oblique):
+    # The view the stickers' shapes and sizes tell (angle/view.py): within 3° of the renderer's, and the
+    # gain error it states holds the one K actually shows without the plane (perspective included).
+    view, true = oblique.image["view"], oblique.truth
+    assert abs(view["view_angle_deg"] - true["view"]["view_angle_deg"]) < 3.0
+    lo, hi = view["view_angle_ci95_deg"]
+    assert lo <= true["view"]["view_angle_deg"] <= hi
+    seen = oblique.image["model"]["gain"] / true["model"]["gain"]
+    glo, ghi = view["angle_gain_ci95"]
+    assert glo <= seen <= ghi
+    said = [w for w in oblique.image["warnings"] if "off square" in w]
+    assert len(said) == 1 and "servoscope plane" in said[0]
+    # With the board's plane nothing is said of the view: the plane is what the warning asks for.
+    assert not any("off square" in w for w in oblique.plane["warnings"])
+
+
+def test_self_calibrated_from_the_stickers_k_is_nearer_and_its_interval_holds_the_truth(oblique, capsys):
+    toml = oblique.folder / "campaign_noplane.toml"
+    text = (oblique.folder / "campaign.toml").read_text()
+    toml.write_text(re.sub(r'^plane = "plane.json"\n', "", text, flags=re.M))
+    out = oblique.folder / "res_self"
+    code, _, err = _run(capsys, "identify", toml, "--out", out, "--workers", 1, "--quiet", "--self-calibrate-plane")
+    assert code == 0, err
+    result = json.loads((out / "result.json").read_text())
+    true = oblique.truth["model"]["gain"]
+    low, high = result["model"]["ci95"]["gain"]
+    assert low <= true <= high
+    assert abs(result["model"]["gain"] / true - 1.0) < 0.5 * abs(oblique.image["model"]["gain"] / true - 1.0)
+    assert result["plane"]["source"].startswith("self-calibrated")
+    # Refused beside a plane: one line, exit 2, nothing written.
+    code, _, err = _run(capsys, "identify", oblique.folder / "campaign.toml", "--out", oblique.folder / "res_both",
+                        "--self-calibrate-plane")
+    assert code == 2 and err.count("\n") == 1 and err.startswith("servoscope: error:")
+    assert not (oblique.folder / "res_both").exists()

@@ -85,8 +85,9 @@ class ObliqueView:
     axis_deg : float
         The image direction the view foreshortens most, counter-clockwise from +x (deg).
     angle_gain : float
-        Angles seen in the image per angle in the plane over the blade's swing (1: square-on;
-        0.94: the image reads angles 6 % small), foreshortening and perspective together.
+        Angles seen in the image per angle in the plane where the blade spends its time (its
+        median angle; 1: square-on; 0.94: the image reads angles 6 % small), foreshortening and
+        perspective together.
     angle_gain_ci95 : (float, float)
         Its 95 % interval.
     swing_deg : float
@@ -254,7 +255,7 @@ def _correction(theta: np.ndarray, c0: np.ndarray, s0: float, mid_px: np.ndarray
 
 
 def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: np.ndarray, seen: np.ndarray,
-               where: np.ndarray, small: float = 1.0
+               where: np.ndarray, at: float, small: float = 1.0
                ) -> tuple[tuple[float, float, float], tuple[float, float, float], np.ndarray]:
     """The view angle at ``where`` and the angle gain, each (value, 95 % low, high), from sampled parameters.
 
@@ -269,7 +270,16 @@ def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: 
     lead_n, trail_n, seen = lead_n[pick], trail_n[pick], seen[pick]
     in_plane = _angles(draws, lead_n, trail_n)
     span = float(np.ptp(seen))
-    gains = np.array([np.polyfit(row, seen, 1)[0] if span > 1e-4 else 1.0 for row in in_plane])
+    # The gain changes along the swing (perspective): taken where the blade spends its time (``at``,
+    # the median image angle of every valid frame: the dwells about the rest angle, whose amplitudes
+    # give K), as the slope there of a quadratic through the sharp frames.
+    def local(row: np.ndarray) -> float:
+        if span <= 1e-4:
+            return 1.0
+        _, b1, _ = np.polyfit(seen - at, row, 2)
+        return float(1.0 / b1)
+
+    gains = np.array([local(row) for row in in_plane])
     _, jmid = _map(draws[:, None, :], np.broadcast_to(where, (draws.shape[0], 1, 2)))
     sv = np.linalg.svd(jmid[:, 0], compute_uv=False)
     angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
@@ -372,8 +382,11 @@ def oblique_view(lead_xy_px: np.ndarray, trail_xy_px: np.ndarray, lead_moments_p
     where = norm(np.asarray(centre_px, dtype=np.float64)[None] if centre_px is not None else c0[None])[0]
     radius = math.sqrt(float(np.median(np.concatenate([area[0][idx], area[1][idx]]))) / math.pi)
     small = max(1.0, (SYSTEMATIC_RADIUS_PX / radius) ** 2)
+    every = np.unwrap(np.arctan2(trail[ok, 1] - lead[ok, 1], lead[ok, 0] - trail[ok, 0]))
+    # On the sharp frames' branch of the unwrapped angle.
+    at = float(np.median(every)) + 2.0 * np.pi * round((float(np.median(seen)) - float(np.median(every))) / (2 * np.pi))
     (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid = _intervals(theta, cov, norm(lead[idx]), norm(trail[idx]), seen, where,
-                                                          small)
+                                                          at, small)
     _, vecs = np.linalg.eigh(jmid[0, 0].T @ jmid[0, 0])
     axis = flip @ vecs[:, 1]  # the image direction the plane stretches most: the one the view shortened
     # Stickers that are not isotropic in the plane turn their anisotropy with the blade: it follows the angle.
