@@ -25,7 +25,7 @@ affine part (foreshortening: 2 numbers) and the projective part (perspective: 2 
   for the intervals, to which the systematic errors measured on the twin are added
   (:data:`VIEW_SYSTEMATIC_DEG`, :data:`GAIN_SYSTEMATIC`, :data:`GAIN_SYSTEMATIC_FRACTION`): the
   tracker's moments carry a small anisotropy of their own (a square-on camera reads 4°), and the
-  perspective's share of the gain read 20 % short at 30° off square.
+  perspective's share of the gain read 13 % short at 30° off square.
 
 From ``G``: the view angle at the blade, ``arccos(σmin/σmax)`` of its Jacobian; the angle gain,
 the slope of the image's angles against the plane's over the frames; the correction, ``G``
@@ -56,7 +56,7 @@ SLOW_PX = 0.3
 _MAX_FRAMES = 3000
 #: Systematic errors of the estimate, measured on the twin's raw footage (480×384, quick preset, round
 #: stickers; docs/accuracy.md "Oblique views"): a square-on camera read 4° (3–5°) off square, 23.7° read
-#: 23.0°, 30.4° read 28°; the angle gain's effect read 20 % short at 30° off square (+18.8 % for +23 %)
+#: 23.0°, 30.4° read 28°; the angle gain's effect read 13 % short at 30° off square (+20.1 % for +23 %)
 #: and 0.2 % off square-on. The intervals add them to the fit's own (in quadrature).
 VIEW_SYSTEMATIC_DEG = 4.0
 GAIN_SYSTEMATIC = 0.003
