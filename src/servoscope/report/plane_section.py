@@ -82,18 +82,17 @@ def plane_section(result: "IdentificationResult", figures_dir: Path | None) -> R
         if board is not None:
             s.figure(board[0], f"The board photo ({board[1]}) with its corners (red; the first row in cyan), found "
                      "again as servoscope plane found them.", "Board photo with its corners", name="plane_board")
-    if view is not None and plane is None:
+    if view is not None and plane is None and not view.determined:
+        s.text(f"The stickers do not tell the camera's view: {view.why}.")
+    elif view is not None and plane is None:
         lo, hi = view.view_angle_ci95_deg
         glo, ghi = view.angle_gain_ci95
-        where = "the picture"
-        s.text(f"The view the stickers show in {where}: a round or square sticker's image is the view's local "
+        s.text("The view the stickers show in the picture: a round or square sticker's image is the view's local "
                "Jacobian, two of them a chord apart in many frames give its foreshortening and its perspective "
                "(docs/accuracy.md, \"Oblique views\"):")
-        s.table(["view angle off square", "95 %", "angle gain (image / plane)", "95 %", "swing", "frames",
-                 "told by the footage"],
+        s.table(["view angle off square", "95 %", "angle gain (image / plane)", "95 %", "swing", "sharp frames"],
                 [[f"{view.view_angle_deg:.1f}°", f"{lo:.1f}–{hi:.1f}°", f"{view.angle_gain:.4f}",
-                  f"{glo:.4f}–{ghi:.4f}", f"{view.swing_deg:.1f}°", view.n_frames,
-                  "yes" if view.determined else "no (the blade turns too little)"]])
+                  f"{glo:.4f}–{ghi:.4f}", f"{view.swing_deg:.1f}°", view.n_frames]])
     said = [w for w in result.warnings if w.startswith(_VIEW_WARNINGS)]
     if said:
         s.warnings(said)
