@@ -206,7 +206,7 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
               help="Leading-edge marker colour (#rrggbb, CSS name, auto); '#rrggbb@x,y' pins it to the blob at "
                    "pixel (x, y) of the first frame.")
 @click.option("--trail", default=TRAIL_COLOUR, show_default=True, help="Trailing-edge marker colour (@x,y pins it).")
-@click.option("--led", default=LED_COLOUR, show_default=True, help="LED colour; 'none' when there is no LED.")
+@click.option("--led", default=LED_COLOUR, show_default=True, help="LED colour (COLOUR@x,y or bright@x,y pins it by position); 'none' when there is no LED.")
 @click.option("--calibration", type=click.Path(path_type=Path), help="camera.json for undistorting centroids.")
 @click.option("--exposure", "exposure_s", type=float,
               help="Exposure (shutter) time in seconds, for the LED's sub-frame timing; leave out when not known "
@@ -248,12 +248,13 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     from .markers import TrackerSettings, parse_colour, track_video
     from .markers.selection import parse_marker_spec
     from .cli_plane import load_plane_option, track_in_view
+    from .cli_track_checks import refuse_too_few_valid
 
     lead, lead_near = parse_marker_spec(lead, what="--lead")
     trail, trail_near = parse_marker_spec(trail, what="--trail")
     for spec, what in ((lead, "--lead"), (trail, "--trail")):
         parse_colour(spec, what=what)
-    led_spec = None if led.lower() == "none" else led
+    led_spec, led_near = (None, None) if led.lower() == "none" else parse_marker_spec(led, what="--led")
     if led_spec:
         parse_colour(led_spec, what="--led")
     reference_pair = None
@@ -281,9 +282,10 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
         raise ServoscopeError(f"--overlay {overlay}: would overwrite the footage itself; choose another file")
     settings = TrackerSettings(lead, trail, led_spec, camera, exposure_s,
                                deinterlace=None if deinterlace == "none" else deinterlace, readout_s=readout_s,
-                               lead_near=lead_near, trail_near=trail_near, timestamp=timestamp,
+                               lead_near=lead_near, trail_near=trail_near, led_near=led_near, timestamp=timestamp,
                                reference=reference_pair, extra=tuple(extra), plane=plane)
     result = track_video(video, settings)
+    refuse_too_few_valid(str(video), result)  # a handful of rows is no measurement: an error, no CSV
     result = track_in_view(name, result, self_calibrate_plane, settings.camera, plane)
     from .video.reader import probe_video
 

@@ -21,6 +21,26 @@ REFERENCE_COLOURS = ("#e377c2", "#17becf")
 #: takes them: hues far from the lead, trail, LED and reference stickers. Real campaigns name their own.
 EXTRA_COLOURS = ("#1f77b4", "#9467bd")
 
+# -- markers: what is not there is not found -----------------------------------------------------
+#: A first-frame blob whose hue is further than this from the colour asked is not that marker
+#: (OpenCV hue units, 2° each: the candidates' ``hue_distance``, markers/selection.py). Measured on
+#: the twin (benchmarks/marker_colour_gate.py: 480×384, 200 frames/s, every 3rd frame, the
+#: sticker's candidate against the colour asked): clean H.264/HEVC/MPEG-2/raw 0.6–1.7; 100 Hz
+#: flicker of 30 % 1.6 (2.7 at 4 Mbit/s); shake 1 px 1.3; a white-balance cast of ±15 % in
+#: red/blue or ±10 % in green 1.2–4.5; H.264 at 0.3–1 Mbit/s 2.5–3.5, HEVC 0.3–2 Mbit/s 3.9–4.2,
+#: MPEG-2 1 Mbit/s 3.0; 10 px stickers 3.0 (4 Mbit/s) to 5.4 (and a cool cast); flicker at
+#: 1 Mbit/s 4.9; an olive sticker under a cool cast at 1 Mbit/s 5.6, the largest; orange, violet,
+#: blue, cyan, pink, olive stickers 0.1–1.9 (pale pink and violet under a ±15 % cast move 10.6–11.9
+#: or leave the ±12-unit band: not trackable either way). OpenCV's vtest.avi (pedestrians, no
+#: stickers) against the red #d62728: its brown clothing 8.0–11.4 (two specks of 12 and 20 px,
+#: 7.0 and 5.1). The gate: 25 % above the largest on footage with the sticker. A flat #883a28
+#: is 5.6 from #d62728: colour alone cannot refuse it (the rigid-pair and valid-frame checks do).
+MARKER_HUE_GATE = 7.0
+#: A track with fewer valid frames than this (and frames left out) is no measurement: ``servoscope
+#: track`` ends in an error (exit 2), not a CSV of a handful of rows. The fits' own minimums: a sine dwell needs 5
+#: valid frames, a step test 10 (campaign/runner.py, sysid/_sine_window.py); the larger is taken.
+MIN_VALID_FRAMES = 10
+
 # -- sysid: when a dwell or a fit earns a warning ------------------------------------------------
 #: Sinusoidal fidelity (share of the output's AC power in the fitted sine) below this flags a
 #: dwell "low_fidelity" (fit_sine) and earns the transfer-function fit a warning.

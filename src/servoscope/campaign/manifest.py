@@ -93,6 +93,10 @@ class Campaign:
     lead_near, trail_near : (float, float) or None
         A marker pinned by position (px, first frame), from
         ``lead = {colour = "#…", near = [x, y]}``; None when not pinned.
+    led_near : (float, float) or None
+        The LED pinned by position (px, first frame; fixed on the stand or on the
+        blade), from ``led = {colour = "#…", near = [x, y]}`` or ``{brightness =
+        "bright", near = [x, y]}``; None: found by its switch.
     reference : (str, str) or None
         Two stickers on the airframe (``[markers] reference = ["#…", "#…"]``):
         the blade's angle is measured against the line joining them.
@@ -123,6 +127,7 @@ class Campaign:
     readout_s: float = 0.0
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
+    led_near: tuple[float, float] | None = None
     timestamp: str = "middle"
     reference: tuple[str, str] | None = None
     extra: tuple[str, ...] = ()
@@ -300,10 +305,10 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     for key in ("lead", "trail"):
         if key not in markers_t:
             problems.add(f"markers.{key}", "missing: give \"#rrggbb\", a CSS colour name, or \"auto\"")
-    near: dict[str, tuple[float, float] | None] = {"lead": None, "trail": None}
+    near: dict[str, tuple[float, float] | None] = {"lead": None, "trail": None, "led": None}
     colours: dict[str, object] = dict(markers_t)
-    for key in ("lead", "trail"):
-        # A marker pinned by position, as a user clicks a point: {colour = "#…", near = [x, y]}.
+    for key in ("lead", "trail", "led"):
+        # A marker (or the LED) pinned by position, as a user clicks a point: {colour = "#…", near = [x, y]}.
         entry = markers_t.get(key)
         if isinstance(entry, dict):
             # A marker told by brightness (monochrome footage) names it instead of a colour.
@@ -522,7 +527,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         path=path.resolve(),
         lead=str(colours["lead"]),
         trail=str(colours["trail"]),
-        led=None if markers_t.get("led") is None else str(markers_t["led"]),
+        led=None if colours.get("led") is None else str(colours["led"]),
         camera=camera,
         exposure_s=exposure,
         input_units=units,
@@ -532,6 +537,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         readout_s=float(readout or 0.0),
         lead_near=near["lead"],
         trail_near=near["trail"],
+        led_near=near["led"],
         timestamp=str(timestamp),
         reference=reference,
         extra=extra,

@@ -50,6 +50,7 @@ def _settings(campaign: Campaign) -> TrackerSettings:
         readout_s=campaign.readout_s,
         lead_near=campaign.lead_near,
         trail_near=campaign.trail_near,
+        led_near=campaign.led_near,
         timestamp=campaign.timestamp,
         reference=campaign.reference,
         extra=campaign.extra,

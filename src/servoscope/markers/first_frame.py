@@ -6,13 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..defaults import MARKER_HUE_GATE
 from ..errors import ServoscopeError
 from .colour import AUTO, BRIGHTNESS, ColourModel
 from .marker_state import MarkerTracker
-from .selection import auto_colour_models, choose_markers, marker_candidates
+from .selection import BlobCandidate, auto_colour_models, choose_markers, marker_candidates
 from .settings import TrackerSettings
 
-__all__ = ["choose_first", "nothing_matches", "take_auto_colours"]
+__all__ = ["choose_first", "gate_candidates", "nothing_matches", "take_auto_colours"]
 
 
 def take_auto_colours(path: Path, rgb: np.ndarray, trackers, led_model: ColourModel | None) -> None:
@@ -46,6 +47,9 @@ def choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSetting
     """
     lead, trail = trackers
     cands = [marker_candidates(rgb, t.model, t.model.hue) if t.model is not None else [] for t in trackers]
+    pins = (settings.lead_near, settings.trail_near)
+    cands = [gate_candidates(path, t, c, rgb, pin is not None, row_offset, row_step)
+             for t, c, pin in zip(trackers, cands, pins)]
     pinned = settings.lead_near is not None or settings.trail_near is not None
     if not pinned and not all(cands):
         return []
@@ -63,6 +67,42 @@ def choose_first(path: Path, rgb: np.ndarray, trackers, settings: TrackerSetting
     lead.hint = (choice.lead.x_px, choice.lead.y_px)
     trail.hint = (choice.trail.x_px, choice.trail.y_px)
     return choice.warnings
+
+
+def gate_candidates(path: Path, tracker, cands: list[BlobCandidate], rgb: np.ndarray, pinned: bool = False,
+                    row_offset: int = 0, row_step: int = 1) -> list[BlobCandidate]:
+    """The candidates whose hue is within :data:`~servoscope.defaults.MARKER_HUE_GATE` of the colour asked.
+
+    What is not there is not found: a blob further from the colour asked than
+    lighting, white balance and codecs move a sticker's is not that marker.
+    Markers told by brightness, or given as ``"auto"`` (their colour is a blob's
+    own), are not gated.
+
+    Raises
+    ------
+    ServoscopeError
+        When blobs of the marker's colour band were seen but none is within
+        the gate: one line naming the marker, the closest colours seen and where;
+        when no blob of its colour band is big enough to be a sticker (and it is
+        not pinned: the pin's error names the nearest blob), :func:`nothing_matches`.
+    """
+    if not isinstance(tracker.model, ColourModel) or isinstance(tracker.seed, str):
+        return cands
+    if not cands:
+        if pinned:
+            return cands
+        raise ServoscopeError(nothing_matches(path, tracker, rgb))
+    kept = [c for c in cands if c.hue_distance <= MARKER_HUE_GATE]
+    if kept:
+        return kept
+    closest = sorted(cands, key=lambda c: c.hue_distance)[:3]
+    seen = ", ".join(f"{c.colour_hex} at ({c.x_px:.0f}, {c.y_px * row_step + row_offset:.0f}) "
+                     f"({2.0 * c.hue_distance:.0f}° of hue off)" for c in closest)
+    raise ServoscopeError(
+        f"{path}: no {tracker.name} marker of colour {_spec_text(tracker.seed)} in the first frame: the closest "
+        f"colours seen are {seen}, further than the {2.0 * MARKER_HUE_GATE:.0f}° of hue that lighting, white "
+        f"balance and codecs move a sticker's colour; check the footage with `servoscope markers {path}` and "
+        "give the stickers' colours")
 
 
 def _auto_models(rgb: np.ndarray, exclude: list[ColourModel]) -> list[ColourModel]:

@@ -113,6 +113,8 @@ class TrackLog:
     warnings: list[str] = field(default_factory=list)
     snapshot: np.ndarray | None = None
     snapshot_index: int = 0
+    #: The LED's candidates and their levels (:class:`~servoscope.markers.led_search.LedSearch`); None: no LED.
+    led_search: object | None = None
 
     def add(self, rec: FrameRecord) -> None:
         """Append one frame: centroids in frame rows, areas, uncertainties and second moments (NaN where a marker is missing).

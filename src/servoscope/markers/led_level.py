@@ -14,8 +14,8 @@ from .led_timing import frame_period_s, led_switch_time
 from .marker_state import Blob
 from .moments import Moments
 
-__all__ = ["LED_CLIP_DN", "LED_PEAK_FRAMES", "InputStart", "disk_peak", "input_start", "led_brightness",
-           "led_row_px", "locate_led"]
+__all__ = ["LED_CLIP_DN", "LED_PEAK_FRAMES", "LED_STAY_FRAMES", "InputStart", "disk_peak", "input_start",
+           "led_brightness", "led_row_px", "locate_led", "stays_down"]
 
 
 def _marker_axes(lead: Moments, trail: Moments) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -82,6 +82,12 @@ def led_brightness(rgb, local, radius, lead: Blob | None, trail: Blob | None) ->
 LED_PEAK_FRAMES = 5
 LED_CLIP_DN = 233.0
 
+#: Frames a switched-off LED must stay down for (and the video must go on for) to count as a
+#: switch: a bright patch that leaves the picture in the last frames, or the video's end, is not one.
+LED_STAY_FRAMES = 5
+#: Of the frames after the switch, the share that must read dark (a passing reflection is let by).
+LED_STAY_SHARE = 0.9
+
 
 def disk_peak(Y, cx: float, cy: float, r: float) -> float:
     """Brightest luma within radius ``r`` of (cx, cy); NaN when the disk is off the image."""
@@ -134,12 +140,15 @@ class InputStart:
 
 def input_start(led_signal: list[float], led_peak_dn: list[float], clock_s: np.ndarray, time_s: np.ndarray,
                 exposure_s: float | None, readout_s: float, snapshot: np.ndarray | None, led_spec,
-                info: VideoInfo, warnings: list[str]) -> InputStart:
+                info: VideoInfo, warnings: list[str],
+                led_xy: tuple[float, float] | None = None) -> InputStart:
     """The LED's switch-off (the input's start) from its brightness per frame; warnings appended.
 
     ``clock_s`` are the exposures' middles (the LED and the stickers share each
     exposure). A clipped LED widens t0's uncertainty to its exposure; a rolling
-    shutter's readout moves t0 to the LED's row (found in ``snapshot``).
+    shutter's readout moves t0 to the LED's row (``led_xy``'s, else found in
+    ``snapshot``). A level that goes dark only in the video's last
+    :data:`LED_STAY_FRAMES` frames, or does not stay dark, is no switch.
     """
     n = time_s.size
     out = InputStart(np.full(n, np.nan))
@@ -156,6 +165,10 @@ def input_start(led_signal: list[float], led_peak_dn: list[float], clock_s: np.n
         warnings.append("LED brightness does not change: no input start (t0) found")
         return out
     out.led_level = (signal - off) / (on - off)
+    why_not = stays_down(out.led_level)
+    if why_not:
+        warnings.append(f"LED {why_not}: not a switch, no input start (t0) found")
+        return out
     t0 = t0_unc = None
     t0_window = None
     switch, why = led_switch_time(clock_s, out.led_level, exposure_s)
@@ -181,7 +194,10 @@ def input_start(led_signal: list[float], led_peak_dn: list[float], clock_s: np.n
         # The LED's rows are exposed readout·y/H after the frame time. Its
         # position before the input starts is where it switched (the
         # blade is at rest until then); the first clean frame shows it.
-        led_row = led_row_px(snapshot, led_spec, info) if snapshot is not None else None
+        if led_xy is not None:
+            led_row = float(info.sensor_rows(np.asarray(led_xy, dtype=np.float64)))
+        else:
+            led_row = led_row_px(snapshot, led_spec, info) if snapshot is not None else None
         if led_row is None:
             warnings.append("rolling shutter: LED not found in the reference frame; "
                             "t0 not corrected for the LED's row")
@@ -189,3 +205,21 @@ def input_start(led_signal: list[float], led_peak_dn: list[float], clock_s: np.n
             t0 = t0 + readout_s * led_row / info.sensor_height
     out.t0_s, out.t0_uncertainty_s, out.t0_window = t0, t0_unc, t0_window
     return out
+
+
+def stays_down(level: np.ndarray) -> str:
+    """Why a level (1 lit, 0 dark) that goes dark does not stay dark; "" when it does (or never goes dark).
+
+    From its first dark frame on, at least :data:`LED_STAY_FRAMES` measured frames, and
+    :data:`LED_STAY_SHARE` of them dark.
+    """
+    ok = np.isfinite(level)
+    dark = np.flatnonzero(ok & (level <= 0.5))
+    if dark.size == 0:
+        return ""
+    after = level[dark[0]:][ok[dark[0]:]]
+    if after.size < LED_STAY_FRAMES:
+        return f"goes dark only in the video's last {after.size} frames"
+    if np.mean(after <= 0.5) < LED_STAY_SHARE:
+        return "does not stay dark after it goes dark"
+    return ""

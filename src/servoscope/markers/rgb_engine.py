@@ -17,6 +17,7 @@ from .colour import AUTO, BRIGHTNESS, BrightnessModel
 from .first_frame import choose_first, nothing_matches, take_auto_colours
 from .frame_record import EngineInput, FrameRecord, TrackLog
 from .led_level import led_brightness, locate_led
+from .led_search import follow_candidates
 from .marker_state import Blob
 
 __all__ = ["run_rgb"]
@@ -69,6 +70,8 @@ def run_rgb(job: EngineInput, log: TrackLog) -> None:
             reason = reason or blob.flaw
 
         led_level = None
+        follow_candidates(log, rgb, lambda: rgb, led_model, found, job.settings.led_near, frame.row_offset,
+                          frame.row_step)
         if led_model is not None:
             if led_local is None and len(found) == 2:
                 led_local, led_radius = locate_led(rgb, led_model, found["lead"].moments, found["trail"].moments)

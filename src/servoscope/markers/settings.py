@@ -78,6 +78,11 @@ class TrackerSettings:
         point: the marker is the blob of its colour there (an error when
         there is none). None (the default): the best-scoring pair of blobs
         (see :mod:`servoscope.markers.selection`).
+    led_near : (float, float) or None
+        Pin the LED by position (px in the first frame): the blob of its colour
+        (or brightness) there, fixed on the stand or on the blade, is followed
+        (an error when there is none). None: the blob by the blade, or where
+        that does not switch, the blob that does (:mod:`servoscope.markers.led_search`).
     readout_s : float
         Rolling-shutter readout time, seconds (0, the default: a global
         shutter). Row y of a frame is taken as exposed around
@@ -129,6 +134,7 @@ class TrackerSettings:
     timestamp: str = "middle"
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
+    led_near: tuple[float, float] | None = None
     reference: tuple[str, str] | None = None
     extra: tuple[str, ...] = ()
     plane: Plane | None = None

@@ -41,6 +41,7 @@ from .colour import AUTO, BRIGHTNESS, ColourModel, parse_colour
 from .frame_checks import flag_nonrigid, flag_repeated
 from .frame_record import EngineInput, TrackLog
 from .led_level import input_start
+from .led_search import led_input_start
 from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s
 from .marker_state import MarkerTracker
 from .rgb_engine import run_rgb
@@ -368,8 +369,12 @@ def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str 
         detail = "; ".join(f"{k}: {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
         warnings.append(f"{invalid} of {n} frames invalid ({detail})")
 
+    own: list[str] = []
     start = input_start(log.led_signal, log.led_peak_dn, angle_clock_s, time_s, settings.exposure_s,
-                        settings.readout_s, log.snapshot, led_spec, info, warnings)
+                        settings.readout_s, log.snapshot, led_spec, info, own)
+    args = dict(clock_s=angle_clock_s, time_s=time_s, exposure_s=settings.exposure_s, readout_s=settings.readout_s,
+                snapshot=log.snapshot, led_spec=led_spec, info=info)
+    start = led_input_start(log.led_search, start, own, args, str(settings.led), warnings)  # type: ignore[arg-type]
     t0_window = start.t0_window
 
     return Track(

@@ -25,6 +25,7 @@ from .frame_checks import same_image
 from .frame_record import EngineInput, FrameRecord, TrackLog
 from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
 from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
+from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
 
@@ -387,6 +388,8 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
             found[tracker.name] = blob
             reason = reason or blob.flaw
         led_level = led_peak = None
+        follow_candidates(log, frame.y, lambda: frame.rgb, led_model, found, settings.led_near, frame.row_offset,
+                          frame.row_step)
         if led_model is not None:
             if led_local is None and len(found) == 2:
                 led_local, led_radius = locate_led(frame.rgb, led_model, found["lead"].moments, found["trail"].moments)

@@ -436,8 +436,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         scene = Scene.for_size(p.width, p.height, **{"background_seed": seed, **scene_kw})
     if p.reference_stickers:
         scene = replace(scene, clutter=tuple(scene.clutter) + reference_stickers(scene))
-    if p.extra_stickers:
-        scene = replace(scene, extra_stickers=p.extra_stickers)
+    scene = led_placed(p, replace(scene, extra_stickers=p.extra_stickers) if p.extra_stickers else scene)
     if p.monochrome and scene.extra_stickers:
         raise ServoscopeError("extra_stickers are told by colour: the twin's monochrome camera films two white dots "
                               "(leave out extra_stickers or monochrome)")
@@ -549,6 +548,13 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                     "(plane px); the recorded picture is homography_plane_to_image, then the lens"}}
            if p.view() is not None else {}),
         "sticker_offset_rad": scene.sticker_offset_rad,
+        # Only an LED off the blade (or its look-alikes) is said: the default truth stays as it was.
+        **({"led": {"place": p.led_place, "xy_px": None if scene.led_fixed_px is None else list(scene.led_fixed_px),
+                    "diameter_px": scene.led_diameter_px,
+                    "distractors": [{"kind": k, "xy_px": list(c.centre_px)}
+                                    for k, c in zip(("glint", "screw"), led_distractors(scene))]
+                    if p.led_distractors else []}}
+           if p.led_place != "blade" or p.led_distractors else {}),
         **({"extra_stickers": [{"colour": c, "position": f} for c, f in scene.extra_stickers]}
            if scene.extra_stickers else {}),
         **({"modes": [{"frequency_hz": hz, "damping_ratio": z, "heave_px_per_rad": k,
@@ -557,6 +563,29 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
         "input_units": p.input_units,
         "tests": tests,
     }
+
+
+def led_placed(p: CampaignPreset, scene: Scene) -> Scene:
+    """The scene with the LED where ``p`` puts it (on the blade or fixed to the stand) and its look-alikes."""
+    if p.led_place == "stand":
+        trail = scene.sticker_centres_px(0.0)[1]
+        xy = p.led_xy_px if p.led_xy_px is not None else (float(trail[0]), 0.2 * scene.height)
+        scene = replace(scene, led_fixed_px=xy)
+    if p.led_distractors:
+        scene = replace(scene, clutter=tuple(scene.clutter) + led_distractors(scene))
+    return scene
+
+
+def led_distractors(scene: Scene) -> tuple[Clutter, Clutter]:
+    """What an LED is taken for: a glint by the hub (the LED's hue, brighter and larger than it) just above
+    the blade at its pivot, and a screw head on the stand (brighter than the LED's off level) beside the LED."""
+    d = scene.led_diameter_px
+    px, py = scene.pivot_xy_px
+    glint = Clutter("#ffe040", (px, py - 0.5 * scene.thickness_ratio * scene.chord_px - 1.5 * d - 3.0),
+                    (1.7 * d, 1.5 * d), shape="disc")
+    led = scene.led_centre_px(0.0)
+    screw = Clutter("#c4c4c4", (float(led[0]) + 4.0 * d, float(led[1])), (0.9 * d, 0.9 * d), shape="disc")
+    return glint, screw
 
 
 def _shape_truth(scene: Scene, bend: float) -> dict:

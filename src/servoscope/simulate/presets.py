@@ -189,6 +189,14 @@ class CampaignPreset:
         seen through the view; truth's positions and angles stay in the plane, and
         the campaign gets a chessboard photo (``board.png``). 0 and 0 (the
         default): square-on.
+    led_place : {"blade", "stand"}
+        Where the status LED is: on the blade (the default) or fixed to the
+        stand, at ``led_xy_px`` (recorded-image px; None: above the trail
+        sticker, a fifth of the height from the top). Truth says where.
+    led_distractors : bool
+        Add what the LED is mistaken for: a specular glint by the hub, brighter
+        and larger than the LED (in its hue), and a screw head brighter than the
+        LED's off level.
     """
 
     name: str
@@ -245,9 +253,23 @@ class CampaignPreset:
     extra_stickers: tuple[tuple[str, float], ...] = ()
     view_yaw_deg: float = 0.0
     view_tilt_deg: float = 0.0
+    led_place: str = "blade"
+    led_xy_px: tuple[float, float] | None = None
+    led_distractors: bool = False
 
     def __post_init__(self) -> None:
         self._check_camera_options()
+        if self.led_place not in ("blade", "stand"):
+            raise ServoscopeError(f"led_place must be 'blade' or 'stand', not {self.led_place!r}")
+        if self.led_place == "stand" and (self.readout_s > 0 or self.motion_blur):
+            raise ServoscopeError("an LED on the stand (led_place='stand') is rendered with a global shutter and "
+                                  "no motion blur")
+        if self.led_xy_px is not None:
+            xy = tuple(float(v) for v in self.led_xy_px)
+            if len(xy) != 2 or not all(math.isfinite(v) for v in xy) or self.led_place != "stand":
+                raise ServoscopeError(f"led_xy_px: two finite pixel coordinates, with led_place='stand' "
+                                      f"(got {self.led_xy_px!r})")
+            object.__setattr__(self, "led_xy_px", xy)
         self.view()  # validates the angles (ServoscopeError)
         freqs = tuple(float(f) for f in np.atleast_1d(self.frequencies_hz))
         if any(not (f > 0 and math.isfinite(f)) for f in freqs):

@@ -251,13 +251,20 @@ class FrameRenderer:
                           *(c + sticker for c in scene.extra_centres_uv())]
         self._colours = [colour_rgb(c) for c in (scene.blade_colour, scene.lead_colour, scene.trail_colour,
                                                   *(c for c, _ in scene.extra_stickers))]
-        if scene.led_offset_px != 0:
+        # An LED on the stand (fixed in the picture): its housing and disk, ideal px, drawn last.
+        self._fixed_led: list[np.ndarray] = []
+        if scene.led_fixed_px is not None:
+            self._fixed_led = [np.asarray(scene.led_fixed_px) + 2.5 * rl * unit,
+                               np.asarray(scene.led_fixed_px) + rl * unit]
+            self._colours.append(colour_rgb(scene.blade_colour))
+        elif scene.led_offset_px != 0:
             # An LED off the chord sits in a dark housing (the blade's colour) on
             # a bracket, as on the blade itself: a tracker that reads the LED's
             # brightness around it sees the LED on a dark ground either way.
             self._parts_uv.append(scene.led_centre_uv() + 2.5 * rl * unit)
             self._colours.append(colour_rgb(scene.blade_colour))
-        self._parts_uv.append(scene.led_centre_uv() + rl * unit)
+        if scene.led_fixed_px is None:
+            self._parts_uv.append(scene.led_centre_uv() + rl * unit)
         self._splits = np.cumsum([len(p) for p in self._parts_uv])[:-1]
         self._all_uv = np.concatenate(self._parts_uv, axis=0)
         # How far each vertex moves per px of each mode's heave: a sticker (a stiff patch) by its
@@ -323,10 +330,15 @@ class FrameRenderer:
             for qj, share in zip(q, self._heave_share):
                 uv[:, 1] += qj if share is None else qj * share
         xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
+        if self._fixed_led:
+            xy = np.concatenate([xy, *self._fixed_led], axis=0)
         if self.view is not None:
             xy = self.view.apply(xy)
         if self.camera is not None:
             xy = self.camera.distort_points(xy)
+        if self._fixed_led:
+            n = len(self._all_uv)
+            return np.split(xy[:n], self._splits) + np.split(xy[n:], [len(self._fixed_led[0])])
         return np.split(xy, self._splits)
 
     def _airframe_map(self, airframe: np.ndarray | None):

@@ -250,6 +250,10 @@ class Scene:
         ``(colour, position)``: its centre on the lead and trail stickers' line,
         at ``position`` of the way from the trail sticker (0) to the lead (1);
         the shape and size of the others'. Empty (the default): two stickers.
+    led_fixed_px : (float, float) or None
+        An LED fixed to the stand, not the blade: its centre in the ideal image
+        (px, not scaled by :meth:`for_size`), in a dark housing; None (the
+        default): on the blade at ``led_chord_fraction``.
     """
 
     width: int = 720
@@ -280,8 +284,14 @@ class Scene:
     sticker_shape: str = "disc"
     sticker_aspect: float | None = None
     extra_stickers: tuple[tuple[str, float], ...] = ()
+    led_fixed_px: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.led_fixed_px is not None:
+            xy = tuple(float(v) for v in self.led_fixed_px)
+            if len(xy) != 2 or not all(math.isfinite(v) for v in xy):
+                raise ServoscopeError(f"scene: led_fixed_px must be two finite coordinates, not {self.led_fixed_px!r}")
+            object.__setattr__(self, "led_fixed_px", xy)
         extras = tuple((str(c), float(f)) for c, f in self.extra_stickers)
         object.__setattr__(self, "extra_stickers", extras)
         if any(not math.isfinite(f) for _, f in extras):
@@ -434,7 +444,9 @@ class Scene:
         return self.to_image(lead_uv, pitch_rad), self.to_image(trail_uv, pitch_rad)
 
     def led_centre_px(self, pitch_rad: float) -> np.ndarray:
-        """LED centre (ideal pixels) at the given pitch."""
+        """LED centre (ideal pixels) at the given pitch (an LED on the stand: where it is fixed)."""
+        if self.led_fixed_px is not None:
+            return np.array(self.led_fixed_px, dtype=np.float64)
         return self.to_image(self.led_centre_uv(), pitch_rad)
 
     def background(self) -> np.ndarray:
