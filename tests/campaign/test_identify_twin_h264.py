@@ -24,10 +24,21 @@ def h264_campaign(tmp_path_factory):
                              bit_rate=20_000_000, include_step=False)
 
 
+@pytest.fixture(scope="module")
+def h264_tracks(h264_campaign, tmp_path_factory):
+    """The campaign tracked once, into a track cache the command-line test starts from (tracking is the cost)."""
+    from servoscope.campaign import track_campaign
+
+    cache = tmp_path_factory.mktemp("h264cache")
+    campaign = load_campaign(h264_campaign)
+    return campaign, track_campaign(campaign, cache_dir=cache), cache
+
+
 @pytest.mark.parametrize("fit", ["magnitude", "complex"])
-def test_h264_intervals_contain_truth(h264_campaign, fit):
+def test_h264_intervals_contain_truth(h264_campaign, h264_tracks, fit):
     truth = json.loads((h264_campaign.parent / "truth.json").read_text())["model"]
-    model = identify(load_campaign(h264_campaign), fit=fit).model
+    campaign, tracks, _ = h264_tracks
+    model = identify(campaign, tracks=tracks, fit=fit).model
     names = ["gain", "natural_frequency_rad_s", "damping_ratio"] + (["dead_time_s"] if fit == "complex" else [])
     tq = student_t.ppf(0.975, model.n_residuals - model.n_params)
     missed_by_jacobian = []
@@ -47,10 +58,13 @@ def test_h264_intervals_contain_truth(h264_campaign, fit):
         assert model.influence["natural_frequency_rad_s"]["dwell"].startswith("dwell_14")
 
 
-def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, tmp_path):
+def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, h264_tracks, tmp_path):
+    import shutil
     import subprocess
     import sys
 
+    # The command finds its tracks in OUT/.cache, as a second run of it would.
+    shutil.copytree(h264_tracks[2], tmp_path / "o" / ".cache")
     proc = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(h264_campaign), "--out", str(tmp_path / "o")],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
@@ -71,15 +85,20 @@ def camcorder_gop_campaign(tmp_path_factory):
                              include_step=False)
 
 
-@pytest.mark.parametrize("fit", ["magnitude", "complex"])
-def test_camcorder_gop_codec_check(camcorder_gop_campaign, fit):
-    import dataclasses
-
+@pytest.fixture(scope="module")
+def camcorder_gop_tracks(camcorder_gop_campaign):
     from servoscope.campaign import track_campaign
 
     campaign = load_campaign(camcorder_gop_campaign)
+    return campaign, track_campaign(campaign, workers=1)
+
+
+@pytest.mark.parametrize("fit", ["magnitude", "complex"])
+def test_camcorder_gop_codec_check(camcorder_gop_campaign, camcorder_gop_tracks, fit):
+    import dataclasses
+
+    campaign, tracks = camcorder_gop_tracks
     truth = json.loads((camcorder_gop_campaign.parent / "truth.json").read_text())["model"]
-    tracks = track_campaign(campaign, workers=1)
     checked = identify(campaign, tracks=tracks, fit=fit)
     # The same tracks without the I-frame marks: every frame fitted alike, as before the codec check.
     blind = identify(campaign, tracks={k: dataclasses.replace(t, intra=None) for k, t in tracks.items()}, fit=fit).model

@@ -36,6 +36,19 @@ def short_campaigns(tmp_path_factory):
     return [simulate_campaign(tmp_path_factory.mktemp(f"short{s}"), preset="paper", seed=s, **SHORT) for s in (1, 3)]
 
 
+_TRACKS: dict = {}
+
+
+def _tracked(campaign):
+    """The campaign and its tracks, tracked once for both fit modes (tracking is the cost, not what differs)."""
+    from servoscope.campaign import track_campaign
+
+    if campaign not in _TRACKS:
+        loaded = load_campaign(campaign)
+        _TRACKS[campaign] = (loaded, track_campaign(loaded))
+    return _TRACKS[campaign]
+
+
 def _names(fit):
     return ["gain", "natural_frequency_rad_s", "damping_ratio"] + (["dead_time_s"] if fit == "complex" else [])
 
@@ -44,7 +57,8 @@ def _errors(campaign, fit, model=None):
     """(name, error / half-width of the 95 % interval) per parameter; prints σ-errors."""
     truth = json.loads((campaign.parent / "truth.json").read_text())
     if model is None:
-        model = identify(load_campaign(campaign), fit=fit).model
+        loaded, tracks = _tracked(campaign)
+        model = identify(loaded, tracks=tracks, fit=fit).model
     out = []
     for name in _names(fit):
         value, (low, high) = model.params[name], model.ci95[name]
@@ -60,7 +74,8 @@ def _errors(campaign, fit, model=None):
 
 @pytest.mark.parametrize("fit", ["magnitude", "complex"])
 def test_paper_model_and_intervals(raw_campaign, fit):
-    result = identify(load_campaign(raw_campaign), fit=fit)
+    loaded, tracks = _tracked(raw_campaign)
+    result = identify(loaded, tracks=tracks, fit=fit)
     model = result.model
     truth = json.loads((raw_campaign.parent / "truth.json").read_text())
     # The stated 95 % intervals contain the truth (HAC per-dwell errors,
