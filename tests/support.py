@@ -153,3 +153,17 @@ def servo_campaign(servo: ServoModel, seed: int, fps: float = 100.0, noise: floa
                                       tr.angle_rad[inside], rcond=None)[0]
             response[tr.label] = (math.hypot(a, b) / tr.amplitude, math.degrees(math.atan2(b, a)), 1.0)
     return traces, response
+
+
+def cli(capsys, *args) -> tuple[int, str, str]:
+    """``servoscope ARGS`` in this process: (exit status, stdout, stderr); earlier output discarded."""
+    from servoscope.cli import main
+
+    capsys.readouterr()
+    try:
+        main([str(a) for a in args])
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    return code, out.out, out.err

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from .camera.plane import Plane
-from .campaign.plane_check import pooled_view, view_warning, with_view_correction
+from .campaign.plane_check import pooled_view, told_view, view_warning, with_view_correction
 from .errors import ServoscopeError
 
 __all__ = ["load_plane_option", "track_in_view"]
@@ -54,10 +54,7 @@ def track_in_view(name: str, result, self_calibrate: bool, camera=None, plane: P
         if said:
             result.warnings.append(said)
         return result
-    if view is None or not view.determined:
-        told = "too few sharp frames" if view is None else view.why
-        raise ServoscopeError(f"{name}: the footage does not tell the camera's view ({told}) for "
-                              "--self-calibrate-plane; calibrate the plane with a board photo instead (servoscope plane)")
+    view = told_view(view, name)
     click.echo(f"{name}: angles corrected for the camera's view: {view.describe()} (resting on round or square "
                "stickers of one size)")
     return with_view_correction(result, view)

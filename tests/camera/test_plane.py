@@ -22,10 +22,10 @@ import pytest
 from servoscope.camera import CameraModel, Plane, calibrate_plane, fit_plane
 from servoscope.camera.calibrate import detect_corners
 from servoscope.camera.plane import refine_plane_corners
-from servoscope.cli import main
 from servoscope.errors import ServoscopeError
 
 from support import CHESSBOARD
+from support import cli as _run  # (exit status, stdout, stderr)
 
 PHOTOS = sorted(CHESSBOARD.glob("left*.jpg"))
 needs_photos = pytest.mark.skipif(
@@ -401,16 +401,6 @@ def test_inputs_without_the_board_or_of_another_size(tmp_path):
 
 
 # -- the command line ---------------------------------------------------------------------------
-
-
-def _run(capsys, *args) -> tuple[int, str, str]:
-    try:
-        main([str(a) for a in args])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @needs_photos

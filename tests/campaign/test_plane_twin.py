@@ -24,6 +24,8 @@ from servoscope.camera import CameraModel
 from servoscope.cli import main
 from servoscope.simulate import simulate_campaign
 
+from support import cli as _run  # (exit status, stdout, stderr)
+
 VIEW = (-25.0, 17.0)  # (yaw, tilt), degrees: arccos(cos 25° · cos 17°) = 29.9° off square
 PARAMS = ("gain", "natural_frequency_rad_s", "damping_ratio", "dead_time_s")
 
@@ -35,13 +37,6 @@ def _cli(*args) -> int:
     except SystemExit as exc:
         return int(exc.code or 0)
     return 0
-
-
-def _run(capsys, *args) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = _cli(*args)
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.fixture(scope="session")

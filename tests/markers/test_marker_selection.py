@@ -16,7 +16,6 @@ import cv2
 import numpy as np
 import pytest
 
-from servoscope.cli import main
 from servoscope.errors import ServoscopeError
 from servoscope.markers import TrackerSettings, track_video
 from servoscope.markers.illumination import GlobalGain
@@ -25,6 +24,8 @@ from servoscope.simulate import Scene
 from servoscope.simulate.render import FrameRenderer
 from servoscope.simulate.scene import marker_angle_rad
 from servoscope.video.writer import VideoWriter
+
+from support import cli
 
 W, H = 480, 384
 BOX_RGB = (160, 48, 42)  # red-brown: the lead sticker's hue (#d62728) within 4°
@@ -70,13 +71,8 @@ def _clip(path: Path, *, n: int = 120, fps: float = 200.0, box: bool = False, bo
 
 def _run(capsys, *args) -> tuple[int, str]:
     """Run the command line in-process: (exit status, what it printed)."""
-    try:
-        main([str(a) for a in args])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out = capsys.readouterr()
-    return code, out.out + out.err
+    code, out, err = cli(capsys, *args)
+    return code, out + err
 
 
 def _rms_deg(track, truth) -> float:

@@ -15,24 +15,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from servoscope.cli import main
 from servoscope.defaults import MARKER_HUE_GATE, MIN_VALID_FRAMES
 from servoscope.markers import Track
 from servoscope.simulate import Clutter, Scene, lamp_gain
 from servoscope.simulate.clips import render_clip
+
+from support import cli
 
 W, H, FPS = 360, 288, 200.0
 
 
 def _run(capsys, *args) -> tuple[int, list[str], str]:
     """The command line in-process: (exit status, stderr's lines, stdout)."""
-    try:
-        main([str(a) for a in args])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out = capsys.readouterr()
-    return code, out.err.strip().splitlines(), out.out
+    code, out, err = cli(capsys, *args)
+    return code, err.strip().splitlines(), out
 
 
 def _render(path: Path, n: int, scene: Scene, **kw) -> dict:

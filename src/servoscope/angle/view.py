@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..camera.plane_fit import apply_homography, homography_jacobian
+
 __all__ = ["ObliqueView", "OBLIQUE_MIN_FRAMES", "SLOW_PX", "oblique_view"]
 
 #: Fewer usable frames than this and the view is not estimated.
@@ -239,11 +241,8 @@ def _correction(theta: np.ndarray, c0: np.ndarray, s0: float, mid_px: np.ndarray
     p, q, g1, g2 = theta
     norm = np.array([[1.0 / s0, 0.0, -c0[0] / s0], [0.0, -1.0 / s0, c0[1] / s0], [0.0, 0.0, 1.0]])
     g = np.array([[p, q, 0.0], [0.0, 1.0, 0.0], [g1, g2, 1.0]]) @ norm
-    m = np.array([mid_px[0], mid_px[1], 1.0])
-    gm = g @ m
-    at = gm[:2] / gm[2]
-    # Its Jacobian at the midpoint (image px in, plane units with y up out).
-    jac = (g[:2, :2] * gm[2] - np.outer(gm[:2], g[2, :2])) / gm[2] ** 2
+    at = apply_homography(g, mid_px)[0]
+    jac = homography_jacobian(g, mid_px)[0]  # image px in, plane units with y up out
     flip = np.diag([1.0, -1.0])  # back to y down
     qm, r = np.linalg.qr(flip @ jac)
     signs = np.sign(np.diag(r))

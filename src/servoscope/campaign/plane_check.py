@@ -22,11 +22,13 @@ from ..defaults import OBLIQUE_GAIN_WARNING, OBLIQUE_VIEW_WARNING_DEG
 from ..errors import ServoscopeError
 from ..camera.model import CameraModel
 from ..camera.plane import Plane
+from ..camera.plane_fit import apply_homography
+from ..camera.plane_map import undistort_jacobian
 from ..markers.track import Track
 from .manifest import Campaign
 
-__all__ = ["SELF_CALIBRATED", "campaign_in_view", "plane_summary", "pooled_view", "sticker_observations", "view_warning",
-           "with_view_correction"]
+__all__ = ["SELF_CALIBRATED", "campaign_in_view", "plane_summary", "pooled_view", "sticker_observations", "told_view",
+           "view_warning", "with_view_correction"]
 
 #: What a track says of the plane it was measured in when the footage's own view corrected it.
 SELF_CALIBRATED = "self-calibrated (stickers' shapes)"
@@ -36,13 +38,6 @@ def _moments(shape_px2: np.ndarray) -> np.ndarray:
     """A track's (mu20, mu11, mu02) rows as 2×2 second-moment matrices."""
     m = np.asarray(shape_px2, dtype=np.float64).reshape(-1, 3)
     return np.stack([np.stack([m[:, 0], m[:, 1]], -1), np.stack([m[:, 1], m[:, 2]], -1)], -2)
-
-
-def _jacobian(fn, xy: np.ndarray, h: float = 0.5) -> np.ndarray:
-    """The Jacobian (n, 2, 2) of a point map at ``xy`` by central differences (the lens varies over hundreds of px)."""
-    jx = (fn(xy + [h, 0.0]) - fn(xy - [h, 0.0])) / (2.0 * h)
-    jy = (fn(xy + [0.0, h]) - fn(xy - [0.0, h])) / (2.0 * h)
-    return np.stack([jx, jy], axis=-1)
 
 
 def sticker_observations(track: Track, camera: CameraModel | None, plane: Plane | None) -> tuple[np.ndarray, ...]:
@@ -72,7 +67,7 @@ def sticker_observations(track: Track, camera: CameraModel | None, plane: Plane 
         jac = np.tile(np.eye(2), (len(a), 1, 1))
         if camera is not None and camera.has_distortion and good.any():
             recorded = camera.distort_points(ideal[good])
-            jac[good] = _jacobian(lambda p: camera.undistort_points(p)[0], recorded)
+            jac[good] = undistort_jacobian(camera, recorded)
         if plane is not None and good.any():
             jac[good] = plane.rectified_jacobian(ideal[good]) @ jac[good]
         a = a * np.abs(np.linalg.det(jac))
@@ -155,12 +150,13 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
     return None
 
 
-def _mapped(xy: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Points (…, 2) through a homography (NaN kept)."""
-    pts = np.asarray(xy, dtype=np.float64)
-    w = pts[..., 0] * h[2, 0] + pts[..., 1] * h[2, 1] + h[2, 2]
-    return np.stack([(pts[..., 0] * h[0, 0] + pts[..., 1] * h[0, 1] + h[0, 2]) / w,
-                     (pts[..., 0] * h[1, 0] + pts[..., 1] * h[1, 1] + h[1, 2]) / w], axis=-1)
+def told_view(view: ObliqueView | None, where) -> ObliqueView:
+    """``view`` when the footage tells it, for ``--self-calibrate-plane``; one clear error naming ``where`` otherwise."""
+    if view is None or not view.determined:
+        raise ServoscopeError(f"{where}: the footage does not tell the camera's view ("
+                              f"{'too few sharp frames' if view is None else view.why}) for --self-calibrate-plane; "
+                              "calibrate the plane with a board photo instead (servoscope plane)")
+    return view
 
 
 def with_view_correction(track: Track, view: ObliqueView) -> Track:
@@ -189,7 +185,7 @@ def with_view_correction(track: Track, view: ObliqueView) -> Track:
         raise ServoscopeError(f"{track.video}: already measured in the plane {track.plane}: "
                               "the footage's own view correction is for footage without one")
     c = np.asarray(view.correction, dtype=np.float64)
-    lead, trail = _mapped(track.lead_xy_px, c), _mapped(track.trail_xy_px, c)
+    lead, trail = apply_homography(c, track.lead_xy_px), apply_homography(c, track.trail_xy_px)
     angle, sigma = blade_angle(lead, trail, track.valid, track.lead_sigma_px, track.trail_sigma_px)
     if track.reference_angle_rad is not None:
         angle = angle - np.nan_to_num(track.reference_angle_rad)
@@ -198,7 +194,7 @@ def with_view_correction(track: Track, view: ObliqueView) -> Track:
     changes: dict = {"lead_xy_px": lead, "trail_xy_px": trail, "angle_rad": np.where(track.valid, angle, np.nan),
                      "angle_sigma_rad": sigma, "plane": SELF_CALIBRATED, "plane_mm_per_px": None}
     if track.extra_xy_px is not None and track.bending_px is not None and track.valid.any():
-        extra = _mapped(track.extra_xy_px, c)
+        extra = apply_homography(c, track.extra_xy_px).reshape(track.extra_xy_px.shape)
         points = np.concatenate([lead[:, None], trail[:, None], extra], axis=1)
         sig = np.concatenate([track.lead_sigma_px[:, None], track.trail_sigma_px[:, None], track.extra_sigma_px],
                              axis=1)
@@ -245,10 +241,7 @@ def campaign_in_view(campaign: Campaign, tracks: dict[str, Track], self_calibrat
     if plane is not None:
         raise ServoscopeError(f"{campaign.path}: [camera] plane is given: the footage's own view correction "
                               "(--self-calibrate-plane) is for footage without a plane; leave one of them out")
-    if view is None or not view.determined:
-        raise ServoscopeError(f"{campaign.path}: the footage does not tell the camera's view ("
-                              f"{'too few sharp frames' if view is None else view.why}): calibrate the plane with a "
-                              "board photo instead (servoscope plane)")
+    view = told_view(view, campaign.path)
     corrected = {label: with_view_correction(t, view) for label, t in tracks.items()}
     lo, hi = view.angle_gain_ci95
     rel = (hi - lo) / (2.0 * 1.96) / view.angle_gain
