@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from .camera.plane import Plane
-from .campaign.plane_check import pooled_view, told_view, view_warning, with_view_correction
+from .markers.plane_view import pooled_view, told_view, view_warning, with_view_correction
 from .errors import ServoscopeError
 
 __all__ = ["load_plane_option", "track_in_view"]

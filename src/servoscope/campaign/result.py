@@ -152,7 +152,7 @@ class IdentificationResult:
         :func:`servoscope.campaign.blade.heave_model`); its mode is also in ``modes``.
     view : ObliqueView or None
         The camera's view of the blade's plane as the markers' separation tells it
-        (:func:`servoscope.campaign.plane_check.pooled_view`): of the image's positions
+        (:func:`servoscope.markers.plane_view.pooled_view`): of the image's positions
         without a plane, of the plane's with one (a check of the plane); None with too
         few frames.
     plane : dict or None

@@ -347,7 +347,7 @@ def identify(
         ``[model] tie``), e.g. ``{"rate_limit_rad_s": "4*gain"}``.
     self_calibrate_plane : bool
         Without a plane (``[camera] plane``): correct every track for the camera's view as the
-        stickers tell it (:func:`~servoscope.campaign.plane_check.with_view_correction`:
+        stickers tell it (:func:`~servoscope.markers.plane_view.with_view_correction`:
         foreshortening and perspective, from round or square stickers of one size), the gain's
         interval widened by the estimate's uncertainty. Refused where the footage does not tell
         the view.
