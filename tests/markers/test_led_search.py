@@ -21,7 +21,7 @@ import pytest
 
 from servoscope.cli import main
 from servoscope.markers import TrackerSettings, track_video
-from servoscope.markers.led_level import stays_down
+from servoscope.markers.led_level import disk_level, stays_down
 from servoscope.markers.led_search import switch_of
 from servoscope.simulate import simulate_campaign
 from servoscope.video import frame_source
@@ -174,3 +174,21 @@ def test_the_led_pinned_in_the_manifest(twins, tmp_path):
     pinned.write_text(text.replace('led = "#ffd400"', 'led = {colour = "#ffd400", near = [10]}'))
     with pytest.raises(ServoscopeError, match="markers.led.near"):
         load_campaign(pinned)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_disk_level_matches_a_numpy_mask(dtype):
+    """The compiled disk (mean and peak) against NumPy's mask of the same disk: inside, at the borders, off the picture."""
+    rng = np.random.default_rng(7)
+    image = rng.integers(0, 255 if dtype == np.uint8 else 4095, size=(40, 60)).astype(dtype)
+    yy, xx = np.mgrid[0:40, 0:60]
+    for cx, cy, r in [(30.3, 20.7, 5.2), (0.4, 0.2, 3.0), (59.6, 39.9, 4.5), (10.0, 10.0, 0.7), (-8.0, 5.0, 3.0),
+                      (30.5, -1.5, 2.5)]:
+        inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+        mean, peak = disk_level(image, cx, cy, r)
+        if not inside.any():
+            assert math.isnan(mean) and math.isnan(peak)
+            continue
+        assert mean == image[inside].astype(np.float64).mean()  # integer samples: exact either way
+        assert peak == float(image[inside].max())
+    assert all(math.isnan(v) for v in disk_level(image, math.nan, 3.0, 2.0))

@@ -272,13 +272,8 @@ def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: 
     # The gain changes along the swing (perspective): taken where the blade spends its time (``at``,
     # the median image angle of every valid frame: the dwells about the rest angle, whose amplitudes
     # give K), as the slope there of a quadratic through the sharp frames.
-    def local(row: np.ndarray) -> float:
-        if span <= 1e-4:
-            return 1.0
-        _, b1, _ = np.polyfit(seen - at, row, 2)
-        return float(1.0 / b1)
-
-    gains = np.array([local(row) for row in in_plane])
+    # One least-squares solve for every draw at once (a column each): the per-draw fits cost ~0.1 s.
+    gains = 1.0 / np.polyfit(seen - at, in_plane.T, 2)[1] if span > 1e-4 else np.ones(draws.shape[0])
     _, jmid = _map(draws[:, None, :], np.broadcast_to(where, (draws.shape[0], 1, 2)))
     sv = np.linalg.svd(jmid[:, 0], compute_uv=False)
     angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))

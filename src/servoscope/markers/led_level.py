@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 
 from ..video.reader import VideoInfo
 from .colour import ColourModel, seed_model
@@ -14,7 +15,7 @@ from .led_timing import frame_period_s, led_switch_time
 from .marker_state import Blob
 from .moments import Moments
 
-__all__ = ["LED_CLIP_DN", "LED_PEAK_FRAMES", "LED_STAY_FRAMES", "InputStart", "disk_peak", "input_start",
+__all__ = ["LED_CLIP_DN", "LED_PEAK_FRAMES", "LED_STAY_FRAMES", "InputStart", "disk_level", "disk_peak", "input_start",
            "led_brightness", "led_row_px", "locate_led", "stays_down"]
 
 
@@ -91,16 +92,43 @@ LED_STAY_SHARE = 0.9
 
 def disk_peak(Y, cx: float, cy: float, r: float) -> float:
     """Brightest luma within radius ``r`` of (cx, cy); NaN when the disk is off the image."""
+    return disk_level(Y, cx, cy, r)[1]
+
+
+def disk_level(Y, cx: float, cy: float, r: float) -> tuple[float, float]:
+    """Mean and brightest luma of the pixels within radius ``r`` of (cx, cy); NaN, NaN off the image.
+
+    Compiled: the LED's search follows up to eight candidates twice a frame, and
+    NumPy's grid, mask and fancy indexing cost ~60 µs a disk (a fifth of the
+    whole command's time on uncompressed footage); the loop costs ~1 µs. The
+    mean of integer samples is exact in float64 either way, so the levels are
+    NumPy's to the bit.
+    """
     if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
-        return math.nan
+        return math.nan, math.nan
+    return _disk_level(Y, float(cx), float(cy), float(r))
+
+
+@njit(cache=True, nogil=True)
+def _disk_level(Y, cx, cy, r):
     h, w = Y.shape
     x0, x1 = max(0, int(math.floor(cx - r))), min(w, int(math.floor(cx + r)) + 1)
     y0, y1 = max(0, int(math.floor(cy - r))), min(h, int(math.floor(cy + r)) + 1)
-    if x1 <= x0 or y1 <= y0:
-        return math.nan
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
-    return float(np.asarray(Y[y0:y1, x0:x1])[inside].max()) if inside.any() else math.nan
+    total = 0.0
+    peak = -math.inf
+    n = 0
+    for i in range(y0, y1):
+        dy = (i - cy) * (i - cy)
+        for j in range(x0, x1):
+            if (j - cx) * (j - cx) + dy <= r * r:
+                v = float(Y[i, j])
+                total += v
+                n += 1
+                if v > peak:
+                    peak = v
+    if n == 0:
+        return math.nan, math.nan
+    return total / n, peak
 
 
 def led_row_px(rgb: np.ndarray, led_spec, info: VideoInfo) -> float | None:

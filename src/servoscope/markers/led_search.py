@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, input_start
+from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, disk_level, input_start
 from .moments import Moments
 
 __all__ = ["LED_STAY_FRAMES", "LedCandidate", "LedSearch", "led_input_start", "switch_of"]
@@ -61,6 +61,8 @@ def _axes(lead: Moments, trail: Moments):
 
 def _disk(image: np.ndarray, cx: float, cy: float, r: float) -> tuple[float, float]:
     """Mean and peak of ``image`` (luma; RGB: its luma) in a disk; NaN off the picture."""
+    if image.ndim == 2:
+        return disk_level(image, cx, cy, r)
     if not (math.isfinite(cx) and math.isfinite(cy)):
         return math.nan, math.nan
     h, w = image.shape[:2]
@@ -70,13 +72,12 @@ def _disk(image: np.ndarray, cx: float, cy: float, r: float) -> tuple[float, flo
         return math.nan, math.nan
     yy, xx = np.mgrid[y0:y1, x0:x1]
     inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
-    roi = np.asarray(image[y0:y1, x0:x1])
-    px = roi[inside]
+    px = np.asarray(image[y0:y1, x0:x1])[inside]
     if px.size == 0:
         return math.nan, math.nan
     # RGB: BT.601 luma, as the YUV engines read it (a lit yellow LED's red clips at 255; its luma does not).
-    px = px.astype(np.float64) @ np.array([0.299, 0.587, 0.114]) if px.ndim == 2 else px
-    return float(px.astype(np.float64).mean()), float(px.max())
+    px = px.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    return float(px.mean()), float(px.max())
 
 
 class LedSearch:
@@ -114,7 +115,13 @@ class LedSearch:
 
     def measure(self, image: np.ndarray, lead: Moments | None, trail: Moments | None) -> None:
         """Each candidate's level in this frame (``image``: luma, or RGB), fixed and carried by the markers."""
-        axes = _axes(lead, trail) if lead is not None and trail is not None else None
+        axes = None
+        if lead is not None and trail is not None:
+            # Python floats: NumPy's 2-vectors cost more than the compiled disk itself.
+            ox, oy = trail.x_px, trail.y_px
+            ax, ay = lead.x_px - ox, lead.y_px - oy
+            length = math.hypot(ax, ay)
+            axes = (ox, oy, ax / length, ay / length, length)
         for c in self.candidates:
             r = 1.5 * c.radius_px + 1.0
             level, peak = _disk(image, c.x_px, c.y_px, r)
@@ -124,9 +131,10 @@ class LedSearch:
             if axes is None:
                 c.borne.append(math.nan)
                 continue
-            origin, e, nrm, length = axes
-            centre = origin + length * (c.local[0] * e + c.local[1] * nrm)
-            level, peak = _disk(image, float(centre[0]), float(centre[1]), r)
+            ox, oy, ex, ey, length = axes
+            u, v = float(c.local[0]), float(c.local[1])
+            # Along the axis e and across it (−e_y, e_x), as LedSearch.find placed it.
+            level, peak = _disk(image, ox + length * (u * ex - v * ey), oy + length * (u * ey + v * ex), r)
             c.borne.append(level)
             if image.ndim == 2 and len(c.peak_borne) < LED_PEAK_FRAMES:
                 c.peak_borne.append(peak)
