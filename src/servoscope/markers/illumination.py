@@ -14,6 +14,16 @@ g is the median, over a sparse grid of the luma plane, of the ratio of the
 frame's luma to the first frame's (both above black). The moving blade
 changes a minority of the grid's pixels; the median ignores them. On still
 footage with sensor noise of 1.5 DN its spread is ~0.1 %.
+
+A rolling shutter breaks the one-factor-per-frame picture: each sensor row
+integrates the lamps over its own exposure window, so flicker shows as bands
+along the rows (100 Hz read out in 3.5 ms: a third of a period over the
+frame). The frame's median then is the light of the frame's middle bands, and
+a sticker in another band was scaled by the wrong gain (5–10 % off at 8 %
+depth: its area read 94–96 % of its reference, "partly hidden"). Under a
+rolling shutter :class:`BandGain` takes each marker's gain from the grid
+samples in the band of sensor rows around it, narrow enough that the lamps'
+phase hardly changes across it.
 """
 
 from __future__ import annotations
@@ -23,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["GlobalGain", "scale_colour", "GAIN_DEADBAND", "BLACK_DN", "NEUTRAL_DN"]
+__all__ = ["GlobalGain", "BandGain", "scale_colour", "GAIN_DEADBAND", "BLACK_DN", "NEUTRAL_DN"]
 
 #: Gains within this of 1 are taken as 1: the learned colour is then used unchanged, so
 #: footage under steady light is tracked exactly as before (bit for bit). A 1 % gain moves a
@@ -37,6 +47,23 @@ NEUTRAL_DN = 128.0
 MIN_SIGNAL_DN = 24.0
 #: About this many grid pixels per frame (the median of 1000 ratios of 2–3 % noise each: ±0.1 %).
 GRID_SAMPLES = 1024
+#: Fastest flicker a band is sized for: mains lamps on 60 Hz flicker at 120 Hz (100 Hz on 50 Hz).
+FLICKER_HZ_MAX = 120.0
+#: A band spans ±30° of that flicker's phase: across it the light changes by at most
+#: depth·(1 − cos 30°) = 13 % of the depth (a 1 % spread at 8 % depth), and on the flicker's
+#: slopes, where it changes fastest, linearly, which the band's median (its middle) does not see.
+BAND_HALF_PHASE_RAD = math.pi / 6.0
+#: ...and at most this fraction of the sensor's rows each side (slow readouts): a band much wider
+#: than the marker's neighbourhood would only add the blade's motion to the samples.
+BAND_MAX_FRACTION = 0.2
+#: About this many samples over the frame for the bands (a band of a tenth of the rows holds
+#: ~400: the median's spread ±0.15 %, a sixth of the dead-band).
+BAND_GRID_SAMPLES = 4096
+#: Fewer bright samples than this in a band: take the frame's gain instead.
+MIN_BAND_SAMPLES = 48
+#: A wide band's samples are thinned to about this many (every k-th): its median's spread is then
+#: ~0.15 % still, at ~13 µs a marker instead of ~30 µs for the ~1900 of a fifth of the rows each side.
+BAND_MAX_SAMPLES = 512
 
 
 class GlobalGain:
@@ -86,6 +113,96 @@ class GlobalGain:
             return 1.0
         # Compiled: ~3 µs a frame (NumPy's slicing and median of 2000 samples took ~18 µs).
         return float(_median_ratio(luma, rows, cols, base, self.black_dn, buf))
+
+
+class BandGain:
+    """Illumination gain of the band of sensor rows around a point, against the first frame.
+
+    Parameters
+    ----------
+    readout_s : float
+        Rolling-shutter readout time (> 0): the bands' width follows from it.
+    axis : {0, 1}
+        The image axis along which the sensor's rows follow one another: 0 (image
+        rows), or 1 (image columns: a phone's 90° or 270° display rotation).
+    black_dn : float
+        Luma of black.
+
+    Notes
+    -----
+    Call :meth:`set_frame` once a frame (the first one is the reference), then
+    :meth:`gain` for each marker. Whole frames only: a rolling shutter is not
+    combined with interlaced fields (see :func:`~servoscope.camera.rolling_shutter.check_readout`).
+    """
+
+    def __init__(self, readout_s: float, axis: int = 0, black_dn: float = BLACK_DN) -> None:
+        if not readout_s > 0 or axis not in (0, 1):
+            raise ValueError("BandGain needs a readout time > 0 and axis 0 or 1")
+        self.readout_s = float(readout_s)
+        self.axis = int(axis)
+        self.black_dn = float(black_dn)
+        self._ref: tuple | None = None
+        self._luma: np.ndarray | None = None
+        self._first = True
+
+    def half_width_px(self, sensor_rows: int) -> float:
+        """Half-width of a band (sensor rows) for a sensor of ``sensor_rows`` rows."""
+        # Row y is exposed readout·y/rows after row 0: ±φ of the flicker's phase is
+        # ±rows·φ/(2π·f·readout) rows.
+        rows = sensor_rows * BAND_HALF_PHASE_RAD / (2.0 * math.pi * FLICKER_HZ_MAX * self.readout_s)
+        return min(rows, BAND_MAX_FRACTION * sensor_rows)
+
+    def set_frame(self, luma: np.ndarray) -> None:
+        """Take ``luma`` (shape (h, w), uint8) as this frame's; the first frame's is the reference."""
+        self._luma = luma
+        if self._ref is not None:
+            self._first = False
+            return
+        h, w = luma.shape
+        step = max(1, int(math.sqrt(h * w / BAND_GRID_SAMPLES)))
+        rows, cols = np.mgrid[step // 2:h:step, step // 2:w:step]
+        if self.axis == 1:
+            rows, cols = rows.T, cols.T  # ordered by column: a band is one slice
+        rows, cols = rows.ravel(), cols.ravel()
+        base = np.asarray(luma)[rows, cols].astype(np.float64) - self.black_dn
+        keep = base >= MIN_SIGNAL_DN
+        rows, cols = rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+        coord = rows if self.axis == 0 else cols
+        self._ref = (rows, cols, base[keep], coord.astype(np.float64), np.empty(int(keep.sum())), (h, w), step)
+
+    def gain(self, along_px: float, fallback: float = 1.0) -> float:
+        """Gain of the band centred on ``along_px`` (the marker's coordinate along :attr:`axis`).
+
+        Parameters
+        ----------
+        along_px : float
+            Image row (axis 0) or column (axis 1) of the band's centre.
+        fallback : float
+            Returned when the band cannot be measured (too few bright samples, another size).
+
+        Returns
+        -------
+        float
+            1.0 on the reference frame.
+        """
+        if self._ref is None or self._luma is None:
+            return fallback
+        if self._first:
+            return 1.0
+        rows, cols, base, coord, buf, shape, step = self._ref
+        if self._luma.shape != shape:
+            return fallback
+        size = shape[self.axis]
+        # Symmetric about the marker (a lopsided band's median is the light of another row),
+        # narrowed near the image's edge, but never under two grid lines each side.
+        half = max(min(self.half_width_px(size), along_px, size - 1 - along_px), 2.0 * step)
+        i0, i1 = np.searchsorted(coord, (along_px - half, along_px + half), side="left")
+        if i1 - i0 < MIN_BAND_SAMPLES:
+            return fallback
+        k = max(1, (i1 - i0) // BAND_MAX_SAMPLES)
+        band = slice(i0, i1, k)
+        n = len(range(i0, i1, k))
+        return float(_median_ratio(self._luma, rows[band], cols[band], base[band], self.black_dn, buf[:n]))
 
 
 def scale_colour(prm_yuv: tuple[float, float, float], gain: float, black_dn: float = BLACK_DN

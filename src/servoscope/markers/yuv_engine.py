@@ -16,14 +16,14 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..video.reader import iter_yuv_frames
+from ..video.reader import iter_yuv_frames, probe_video
 from . import kernels as K
 from .centroid import SoftCentroid
 from .colour import AUTO, ycbcr_bt601
 from .first_frame import choose_first, nothing_matches, take_auto_colours
 from .frame_checks import same_image
 from .frame_record import EngineInput, FrameRecord, TrackLog
-from .illumination import GAIN_DEADBAND, GlobalGain, scale_colour
+from .illumination import GAIN_DEADBAND, BandGain, GlobalGain, scale_colour
 from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
@@ -53,6 +53,10 @@ YUV_EXTRA_MARGIN_PX = -1.5
 AGREE = 0.15
 #: Clip of the membership.
 ALPHA_RANGE = (0.0, 1.0)
+#: Under a rolling shutter, each marker's illumination gain from the band of sensor rows around
+#: it (:class:`~.illumination.BandGain`), not the frame's: flicker lights the bands differently.
+#: False keeps the frame's gain for every marker (the behaviour before issue 29; benchmarks).
+BAND_GAIN = True
 
 
 def _chroma_angle(uv: np.ndarray) -> np.ndarray:
@@ -269,7 +273,8 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
     found. The LED's level is measured by its own kernel on the frames where
     the markers' kernel took the slow path, else by the markers' call.
     Frames' illumination against the first's scales the learned colours
-    (:mod:`.illumination`). Long because its steps share the kernels'
+    (:mod:`.illumination`); under a rolling shutter each marker's by the light
+    of its own band of sensor rows (:data:`BAND_GAIN`). Long because its steps share the kernels'
     buffers and the per-frame state, which is clearer in one place.
 
     Raises
@@ -294,11 +299,27 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
     gain_of = GlobalGain()
     gain = 1.0  # this frame's illumination against the first frame's (see illumination.py)
     gains: list[float] = []
+    band_of = None
+    if settings.readout_s > 0 and job.fields is None and BAND_GAIN:
+        # The sensor's rows are the image's columns under a phone's quarter-turn rotation.
+        band_of = BandGain(settings.readout_s, axis=1 if (probe_video(path).rotation_deg // 90) % 2 else 0)
+
+    def gain_at(window) -> float:
+        """The illumination gain for a marker measured in ``window``: its band's, else the frame's."""
+        if band_of is None or window is None:
+            return gain
+        # The window is (x0, y0, x1, y1): the band's axis 0 (rows) is its y, axis 1 its x.
+        i = 1 - band_of.axis
+        along = 0.5 * (window[i] + window[i + 2] - 1)
+        g = band_of.gain(along, gain)
+        if abs(g - 1.0) > abs(worst[0] - 1.0):
+            worst[0] = g
+        return g
 
     def measure_one(k: int, frame, window, centre=None) -> Blob | None:
         one = np.zeros((2, K.NP))
         one[k] = trackers[k].yuv.prm
-        _apply_gain(one[k], gain)
+        _apply_gain(one[k], gain_at(window))
         one[k, K.P.X0:K.P.Y1 + 1] = window
         if centre is not None:
             one[k, K.P.CX], one[k, K.P.CY], one[k, K.P.USE_CENTRE] = centre[0], centre[1], 1.0
@@ -314,7 +335,9 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
         repeated = prev is not None and same_image(prev, frame)
         prev = frame
         gain = gain_of(frame.y, frame.row_offset)
-        gains.append(gain)
+        worst = [gain]  # the gain furthest from 1 this frame took, for the warning
+        if band_of is not None:
+            band_of.set_frame(frame.y)
         found: dict[str, Blob] = {}
         reason = ""
         slow = False
@@ -354,7 +377,6 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
             if tracker.yuv.phi0 is not None and beta is not None:
                 _orient(tracker.yuv.prm, tracker.yuv.phi0 + beta - tracker.yuv.beta0)
             params[k] = tracker.yuv.prm
-            _apply_gain(params[k], gain)
             window = _window(tracker, shape) if tracker.has_position or not slow else None
             if window is None and slow:
                 m = first[tracker.name].moments  # the first frame: around the found blob
@@ -363,6 +385,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
             if window is None:
                 params[k, K.P.ENABLED] = 0.0
             else:
+                _apply_gain(params[k], gain_at(window))
                 params[k, K.P.X0:K.P.Y1 + 1] = window
         led_prm[0] = 1.0 if led_local is not None else 0.0
         kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, params, led_prm, out, led_out)
@@ -404,6 +427,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
             led_level = float(led_out[0]) if led_local is not None and len(found) == 2 else math.nan
             if led_local is not None and len(found) == 2 and len(log.led_peak_dn) < LED_PEAK_FRAMES:
                 led_peak = disk_peak(frame.y, led_out[2], led_out[3], led_prm[3])
+        gains.append(worst[0])
         log.add(FrameRecord(frame.index, frame.time_s, frame.intra, frame.row_offset, frame.row_step, found, reason,
                             repeated, lambda frame=frame: frame.rgb, led_level, led_peak))
         if job.progress is not None and frame.index % 50 == 0:
@@ -413,7 +437,8 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
         lo, hi = min(gains), max(gains)
         log.warnings.append(f"illumination varied ({100 * (lo - 1):+.1f} % to {100 * (hi - 1):+.1f} % of the first "
                         f"frame's: flicker, auto-exposure or clouds) in {len(corrected)} of {len(gains)} frames; "
-                        "the markers' colours were scaled with it")
+                        "the markers' colours were scaled with it"
+                        + (" (each by the light of its band of sensor rows: a rolling shutter)" if band_of else ""))
 
 
 def _apply_gain(prm: np.ndarray, gain: float) -> None:
