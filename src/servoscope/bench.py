@@ -443,8 +443,9 @@ def check_targets(result: dict) -> list[dict]:
 
 @click.command("bench")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
-@click.option("--frames", type=click.IntRange(min=2), default=2000, show_default=True, help="Frames per clip.")
-@click.option("--size", default="720x576", show_default=True, help="Frame size WxH (even).")
+@click.option("--frames", type=click.IntRange(min=2), default=None,
+              help="Frames per clip.  [default: 2000; with --mono 10000]")
+@click.option("--size", default=None, help="Frame size WxH (even).  [default: 720x576; with --mono 1024x1024]")
 @click.option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Folder for the rendered clips (default ~/.cache/servoscope/bench).")
 @click.option("--repeat", type=click.IntRange(min=1), default=1, show_default=True, help="Best of this many runs.")
@@ -453,9 +454,14 @@ def check_targets(result: dict) -> list[dict]:
 @click.option("--whole", is_flag=True,
               help="Also time whole processes: `python -m servoscope track` vs an OpenCV script and decode-only.")
 @click.option("--gpu-only", is_flag=True, help="Only the GPU pass, on the uncompressed clip.")
-def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int, workers: int, whole: bool,
-          gpu_only: bool) -> None:
-    """Tracking speed vs decoding alone and vs an OpenCV pipeline (raw and H.264 clips)."""
+@click.option("--mono", is_flag=True,
+              help="A monochrome high-speed camera's 12-bit MRAW instead: tracking vs reading the file alone and vs a "
+                   "user's OpenCV script (threshold, contours, moments of each whole frame).")
+def bench(as_json: bool, frames: int | None, size: str | None, cache: Path | None, repeat: int, workers: int,
+          whole: bool, gpu_only: bool, mono: bool) -> None:
+    """Tracking speed vs decoding alone and vs an OpenCV pipeline (raw and H.264 clips; --mono: an MRAW)."""
+    size = size or ("1024x1024" if mono else "720x576")
+    frames = frames or (10_000 if mono else 2000)
     try:
         width, height = (int(v) for v in size.lower().split("x"))
     except ValueError:
@@ -463,6 +469,21 @@ def bench(as_json: bool, frames: int, size: str, cache: Path | None, repeat: int
     if width % 2 or height % 2 or width < 64 or height < 64:
         raise click.BadParameter("width and height must be even and ≥ 64", param_hint="--size")
     echo = None if as_json else click.echo
+    if mono:
+        from .bench_mono import MONO_TARGETS, mono_bench
+
+        if width != height:
+            raise click.BadParameter("--mono renders square frames (WxW)", param_hint="--size")
+        result = mono_bench(cache or _default_cache(), frames, width, repeat, whole, echo=echo)
+        result["targets"] = [{"what": what, "measured": result[key], "target": target,
+                              "met": bool(result[key] >= target)} for what, key, target in MONO_TARGETS]
+        if as_json:
+            click.echo(json.dumps(result))
+        else:
+            for row in result["targets"]:
+                click.echo(f"  target {row['what']}: {row['measured']:.2f} (>= {row['target']:g}) "
+                           f"{'met' if row['met'] else 'NOT met'}")
+        return
     result = run_bench(frames, width, height, cache, repeat, workers, echo=echo, whole=whole, gpu_only=gpu_only)
     if as_json:
         click.echo(json.dumps(result))

@@ -131,7 +131,8 @@ def _code_identity() -> dict:
     root = Path(__file__).resolve().parents[1]
     files = sorted(root.joinpath("markers").glob("*.py")) + [
         root / "video" / "reader.py",
-        *(root / "video" / f"{name}.py" for name in ("planes", "frame_source", "sources", "sequence", "highspeed")),
+        *(root / "video" / f"{name}.py" for name in ("planes", "frame_source", "sources", "sequence", "highspeed",
+                                                     "native")),
         root / "camera" / "model.py",
         root / "camera" / "plane.py",
         root / "camera" / "plane_map.py",

@@ -59,7 +59,7 @@ class TrackerSettings:
         not yet robust to H.264 chroma bleed and small stickers. Both are
         estimators of the RGB path (``engine="reference-rgb"``); the YUV
         engines have their own (see :mod:`servoscope.markers.kernels`).
-    engine : {"auto", "numba", "numpy", "reference-rgb"}
+    engine : {"auto", "numba", "numpy", "mono", "reference-rgb"}
         ``"numba"`` (what ``"auto"`` picks): the fused kernel on the
         decoder's YUV planes, classifying by chroma and unmixing with
         full-resolution luma, decoding on a second thread; the most accurate
@@ -67,6 +67,11 @@ class TrackerSettings:
         reference). ``"reference-rgb"``: the previous path (every frame
         converted to RGB, HSV masks, ``centroid`` estimator), for comparison.
         With ``centroid="projected"``, ``"auto"`` picks ``"reference-rgb"``.
+        ``"mono"`` (what ``"auto"`` picks when both markers are told by
+        brightness, on whole frames): the monochrome kernel on the camera's
+        native samples (memory-mapped MRAW and CINE, TIFF sequences; no 8-bit
+        rounding), see :mod:`servoscope.markers.mono_engine`; ``"reference-rgb"``
+        is its oracle.
     backend : {"auto", "cpu"}
         Where the kernel runs: this machine's CPU. ``"cuda"`` is refused with
         an error: no tracking engine runs on a GPU yet (the GPU pass of
@@ -140,7 +145,7 @@ class TrackerSettings:
     plane: Plane | None = None
 
 
-ENGINES = ("auto", "numba", "numpy", "reference-rgb")
+ENGINES = ("auto", "numba", "numpy", "mono", "reference-rgb")
 BACKENDS = ("auto", "cpu")
 #: Backends once offered, refused with what to use instead.
 RETIRED_BACKENDS = {"cuda": "no tracking engine runs on a GPU: the GPU pass (servoscope.markers.gpu, measured by "
@@ -159,8 +164,17 @@ def resolve_engine(settings: TrackerSettings) -> str:
     brightness = any(str(m).strip().lower() in BRIGHTNESS for m in (settings.lead, settings.trail))
     if brightness and settings.engine in ("numba", "numpy"):
         raise ServoscopeError(f"engine {settings.engine!r} tells markers by colour; markers told by brightness "
-                              "(\"bright\", \"dark\") are tracked by engine=\"reference-rgb\" (or \"auto\")")
+                              "(\"bright\", \"dark\") are tracked by engine=\"mono\" or \"reference-rgb\" "
+                              "(or \"auto\")")
+    # The monochrome engine: both markers told by brightness, whole frames, the local estimator.
+    mono = (all(str(m).strip().lower() in BRIGHTNESS for m in (settings.lead, settings.trail))
+            and settings.deinterlace is None and settings.centroid == "local")
+    if settings.engine == "mono" and not mono:
+        raise ServoscopeError("engine \"mono\" tracks whole frames of two markers told by brightness (\"bright\", "
+                              "\"dark\") with centroid=\"local\"; use engine=\"reference-rgb\" (or \"auto\")")
     if settings.engine == "auto":
+        if mono:
+            return "mono"
         return "reference-rgb" if settings.centroid == "projected" or brightness else "numba"
     return settings.engine
 

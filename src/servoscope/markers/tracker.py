@@ -44,6 +44,7 @@ from .led_level import input_start
 from .led_search import led_input_start
 from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s
 from .marker_state import MarkerTracker
+from .mono_engine import run_mono
 from .rgb_engine import run_rgb
 from .settings import BACKENDS, ENGINES, TrackerSettings, extra_marker_problems, resolve_engine
 from .timebase import frame_timing
@@ -121,6 +122,8 @@ def track_video(
     log = TrackLog()
     if engine == "reference-rgb":
         run_rgb(job, log)
+    elif engine == "mono":
+        run_mono(job, log)
     else:
         run_yuv(job, engine, log)
     if progress is not None:

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..video.sequence_writer import TiffSequenceWriter
+from ..video.sequence_writer import MRAW_NAME, MrawWriter, TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
@@ -204,7 +204,10 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     # What the renderer moves each frame by: the heave (one mode), or each mode's (two).
     frame_heave = (lambda i: float(heave[i])) if len(per_mode) <= 1 else (lambda i: tuple(per_mode[:, i]))
     blur = _blur_samples(preset, signal, time_s, scene) if preset.motion_blur else None
-    if preset.frames_format is not None:
+    if preset.frames_format == "mraw":
+        # 12-bit samples packed two in three bytes, as Photron's cameras save them; 8 in bytes, 16 in words.
+        writer_cm = MrawWriter(path, preset.width, preset.height, fps, preset.bit_depth)
+    elif preset.frames_format is not None:
         writer_cm = TiffSequenceWriter(path, preset.width, preset.height, fps)
     else:
         writer_cm = VideoWriter(path, preset.width, preset.height, fps, codec=preset.codec, bit_rate=preset.bit_rate,
@@ -315,11 +318,12 @@ def mode_heaves_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarr
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
     """A monochrome camera's frame: the noise-free scene's BT.601 luma at ``bit_depth`` bits, with its noise.
 
-    The sensor noise is ``noise_sigma_dn`` of 8-bit DN scaled to the depth (seeded per
-    frame), then the samples are rounded and clipped to the depth's range.
+    The scene's luma is scaled by ``light_level`` (a dim exposure), the sensor noise is
+    ``noise_sigma_dn`` of 8-bit DN scaled to the depth (seeded per frame), then the
+    samples are rounded and clipped to the depth's range.
     """
     top = 2 ** preset.bit_depth - 1
-    y = luma_bt601(clean_rgb).astype(np.float64) * (top / 255.0)
+    y = luma_bt601(clean_rgb).astype(np.float64) * (preset.light_level * top / 255.0)
     rng = np.random.default_rng([noise_seed, 0x6A7, index])
     y += rng.standard_normal(y.shape) * (preset.noise_sigma_dn * top / 255.0)
     return np.clip(np.rint(y), 0, top).astype(np.uint8 if preset.bit_depth <= 8 else np.uint16)
@@ -539,7 +543,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                                           "reference_stickers", "monochrome", "sine_amplitudes",
                                           "blade_mode_hz", "blade_mode_damping", "blade_mode_px_per_rad",
                                           "blade_mode_bend", "blade_mode2", "bit_depth", "view_yaw_deg",
-                                          "view_tilt_deg")
+                                          "view_tilt_deg", "light_level")
                if getattr(p, k) != getattr(_DEFAULT, k)},
         },
         # An oblique camera: the homography from the plane, where truth's positions and angles are.
@@ -619,7 +623,8 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
         f"units = {_toml_str(p.input_units)}",
     ]
     for t in tests:
-        source = ([f"frames = {_toml_str(t['video'] + '/*.tif')}", f"fps = {_toml_float(float(frames_fps))}"]
+        frames = t["video"] + (f"/{MRAW_NAME}.cih" if p.frames_format == "mraw" else "/*.tif")
+        source = ([f"frames = {_toml_str(frames)}", f"fps = {_toml_float(float(frames_fps))}"]
                   + ([f"bits = {p.bit_depth}"] if p.monochrome else [])
                   if frames_fps is not None else [f"video = {_toml_str(t['video'])}"])
         lines += ["", "[[tests]]", *source, f"kind = {_toml_str(t['kind'])}"]

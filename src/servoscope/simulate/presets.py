@@ -176,11 +176,19 @@ class CampaignPreset:
         ``"bright"``. Needs ``frames_format="tiff16"``; global shutter, no blur.
     bit_depth : int
         Monochrome samples' depth: 8, 10, 12 or 16.
-    frames_format : {None, "tiff16"}
+    light_level : float
+        Monochrome footage's exposure against the rendered scene's (0 < level <= 1):
+        the scene's luma is scaled by it before the sensor noise (which stays), as
+        a camera at a short shutter or in dim light records; 0.1: lit at 10 % of
+        full scale. 1 (the default): as rendered.
+    frames_format : {None, "tiff16", "mraw"}
         Write each test as a folder of frames instead of a video (the
         manifest then says ``frames`` and ``fps``): ``"tiff16"``, 16-bit RGB
         TIFFs of the rendered 8-bit frames (``v · 257``), as high-speed
-        cameras save; the codec is then unused.
+        cameras save; the codec is then unused. ``"mraw"`` (monochrome only):
+        a Photron MRAW with its CIH header in the test's folder
+        (``frames.cih``; 8-bit samples in bytes, 12-bit packed two in three
+        bytes, 16-bit in words).
     view_yaw_deg, view_tilt_deg : float
         An oblique camera (:class:`~servoscope.simulate.view.ObliqueView`): turned
         about the blade plane's vertical axis (positive: to the blade's right) and
@@ -244,6 +252,7 @@ class CampaignPreset:
     reference_stickers: bool = False
     monochrome: bool = False
     bit_depth: int = 8
+    light_level: float = 1.0
     sine_amplitudes: tuple[float, ...] | None = None
     blade_mode_hz: float = 0.0
     blade_mode_damping: float = 0.03
@@ -310,8 +319,14 @@ class CampaignPreset:
             raise ServoscopeError("blur_step_px must be > 0 and blur_max_samples an integer >= 1")
         if self.timestamp_at not in TIMESTAMP_AT:
             raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
-        if self.frames_format not in (None, "tiff16"):
-            raise ServoscopeError(f"frames_format must be None or 'tiff16', not {self.frames_format!r}")
+        if self.frames_format not in (None, "tiff16", "mraw"):
+            raise ServoscopeError(f"frames_format must be None, 'tiff16' or 'mraw', not {self.frames_format!r}")
+        if self.frames_format == "mraw" and not (self.monochrome and self.bit_depth in (8, 12, 16)):
+            raise ServoscopeError("frames_format=\"mraw\" writes a monochrome camera's file of 8, 12 or 16 bits: "
+                                  "set monochrome=True and bit_depth")
+        if not (0.0 < self.light_level <= 1.0) or (self.light_level != 1.0 and not self.monochrome):
+            raise ServoscopeError(f"light_level must be in (0, 1], and other than 1 only for monochrome footage, "
+                                  f"not {self.light_level!r}")
         if not (math.isfinite(self.blade_mode_hz) and self.blade_mode_hz >= 0
                 and 0 < self.blade_mode_damping < 1 and math.isfinite(self.blade_mode_px_per_rad)
                 and math.isfinite(self.blade_mode_bend)):
@@ -335,9 +350,10 @@ class CampaignPreset:
             if not (math.isfinite(amp) and math.isfinite(hz) and hz > 0 and abs(amp) < 0.5):
                 raise ServoscopeError(f"{name}_rad must be finite and under 0.5 rad, {name}_hz > 0 (got {amp!r}, "
                                       f"{hz!r})")
-        if self.monochrome and (self.frames_format != "tiff16" or self.bit_depth not in (8, 10, 12, 16)
+        if self.monochrome and (self.frames_format not in ("tiff16", "mraw") or self.bit_depth not in (8, 10, 12, 16)
                                 or self.readout_s > 0 or self.motion_blur):
-            raise ServoscopeError("monochrome footage is written as an image sequence (frames_format=\"tiff16\") "
+            raise ServoscopeError("monochrome footage is written as an image sequence or an MRAW (frames_format="
+                                  "\"tiff16\" or \"mraw\") "
                                   "of 8, 10, 12 or 16 bits, with a global shutter and no motion blur")
         if self.readout_s > 0:
             # The row-by-row renderer draws one pose per row; blur would need

@@ -17,10 +17,12 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["FRAMES_FORMATS", "TiffSequenceWriter"]
+__all__ = ["FRAMES_FORMATS", "MRAW_NAME", "MrawWriter", "TiffSequenceWriter", "pack_12bit"]
 
 #: Image-sequence formats the twin writes: name → (file suffix, bits).
 FRAMES_FORMATS = {"tiff16": (".tif", 16)}
+#: The twin's MRAW in a test's folder: ``<folder>/frames.mraw`` with ``frames.cih`` beside it.
+MRAW_NAME = "frames"
 
 
 class TiffSequenceWriter:
@@ -95,3 +97,93 @@ class TiffSequenceWriter:
 
     def close(self) -> None:
         """Nothing held open between frames."""
+
+
+def pack_12bit(samples: np.ndarray) -> np.ndarray:
+    """12-bit samples (uint16, an even count) packed two in three bytes as Photron stores them (big-endian nibbles).
+
+    The inverse of :func:`servoscope.video.highspeed.unpack_12bit` (and of pyMRAW's reader).
+    """
+    v = np.asarray(samples, dtype=np.uint16).reshape(-1, 2)
+    out = np.empty((v.shape[0], 3), np.uint8)
+    out[:, 0] = v[:, 0] >> 4
+    out[:, 1] = ((v[:, 0] & 15) << 4) | (v[:, 1] >> 8)
+    out[:, 2] = v[:, 1] & 255
+    return out.reshape(-1)
+
+
+class MrawWriter:
+    """Write monochrome frames as a Photron MRAW with its CIH header (8-bit, packed 12-bit or 16-bit words).
+
+    What a Photron high-speed camera saves (pyMRAW's ``save_mraw`` writes 8- and
+    16-bit words only; packed 12-bit is the cameras' own compact format). The
+    same interface as :class:`TiffSequenceWriter`'s ``write_gray``; the header is
+    written on :meth:`close` (it holds the frame count).
+
+    Parameters
+    ----------
+    folder : path-like
+        Created if needed; the files are ``frames.mraw`` and ``frames.cih`` in it.
+    width, height : int
+    fps : float or Fraction
+    word_bits : {8, 12, 16}
+        How samples are stored: bytes, packed 12-bit, or 16-bit words (low bits).
+    """
+
+    def __init__(self, folder: str | Path, width: int, height: int, fps: float | Fraction, word_bits: int = 12):
+        if word_bits not in (8, 12, 16):
+            raise ServoscopeError(f"MRAW samples are stored in 8, 12 (packed) or 16 bits, not {word_bits}")
+        if word_bits == 12 and width % 2:
+            raise ServoscopeError("a packed 12-bit MRAW needs an even width")
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.mraw = self.folder / f"{MRAW_NAME}.mraw"
+        self.cih = self.folder / f"{MRAW_NAME}.cih"
+        if self.mraw.exists():
+            raise ServoscopeError(f"{self.mraw}: already exists; write an MRAW into an empty folder")
+        self.width, self.height = int(width), int(height)
+        self.fps = Fraction(fps).limit_denominator(1_000_000)
+        self.word_bits = int(word_bits)
+        self.bits = 8 if word_bits == 8 else 12
+        self.frames_written = 0
+        self._file = open(self.mraw, "wb")
+
+    def __enter__(self) -> "MrawWriter":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def write_gray(self, frame: np.ndarray, bits: int, time_s: float | None = None) -> float:
+        """Append one frame of ``bits``-bit samples (no more than the words hold); return its time."""
+        a = np.asarray(frame)
+        if a.shape != (self.height, self.width) or bits > self.word_bits or (a.size and int(a.max()) >= 2**bits):
+            raise ServoscopeError(f"frame must be of shape {(self.height, self.width)} with samples of at most "
+                                  f"{self.word_bits} bits, not {a.dtype} {a.shape} of {bits} bits")
+        self.bits = int(bits)
+        t = float(Fraction(self.frames_written) / self.fps)
+        if time_s is not None and abs(time_s - t) > 1e-9:
+            raise ServoscopeError(f"{self.mraw}: frames are evenly spaced; frame {self.frames_written} is at {t} s, "
+                                  f"not {time_s} s")
+        if self.word_bits == 8:
+            data = a.astype(np.uint8)
+        elif self.word_bits == 12:
+            data = pack_12bit(a)
+        else:
+            data = a.astype("<u2")
+        data.tofile(self._file)
+        self.frames_written += 1
+        return t
+
+    def close(self) -> None:
+        """Close the MRAW and write its CIH header (the lines pyMRAW's ``get_cih`` reads)."""
+        if self._file.closed:
+            return
+        self._file.close()
+        fields = {"Record Rate(fps)": f"{float(self.fps):.17g}", "Shutter Speed(s)": f"{1.0 / float(self.fps):.9f}",
+                  "Total Frame": self.frames_written, "Original Total Frame": self.frames_written,
+                  "Start Frame": 0, "Image Width": self.width, "Image Height": self.height, "Color Type": "Mono",
+                  "Color Bit": self.word_bits, "File Format": "MRaw", "EffectiveBit Depth": self.bits,
+                  "EffectiveBit Side": "Lower", "Comment Text": "servoscope digital twin"}
+        self.cih.write_text("#Camera Information Header\n" + "".join(f"{k} : {v}\n" for k, v in fields.items()))
