@@ -80,11 +80,43 @@ def test_identify_command_on_monochrome_footage(mono, bits):
     assert not list(out.parent.glob(f"{out.name}.tmp-*"))
 
 
-def test_monochrome_report_renders_in_chromium(mono, tmp_path):
+@pytest.fixture(scope="module")
+def mraw(tmp_path_factory):
+    """A Photron camera's campaign: packed 12-bit MRAW files, one folder per dwell, each ``frames.cih`` (the
+    same name, as a camera's program saves them), the LED fixed to the stand; (campaign.toml, output, exit code)."""
+    root = tmp_path_factory.mktemp("mraw-cli")
+    toml = simulate_campaign(root / "twin", "quick", 12, bit_depth=12, led_place="stand",
+                             **{**TWIN, "frames_format": "mraw"})
+    return toml, root / "out", identify(toml, root / "out")
+
+
+def test_identify_command_on_a_photron_mraw_with_the_led_on_the_stand(mraw):
+    toml, out, code = mraw
+    assert code == 0
+    result = json.loads((out / "result.json").read_text())
+    # Labels from the folders: every recording's file is called frames.cih.
+    assert [t["label"] for t in result["tests"]] == ["dwell_01_1.50Hz", "dwell_02_4.00Hz", "dwell_03_10.00Hz"]
+    # Every frame valid; each dwell's input start found from the stand's LED (its switch, not a blob on the blade).
+    assert all(t["valid_frames"] == t["frames"] and t["t0_s"] is not None for t in result["tests"])
+    truth = json.loads((toml.parent / "truth.json").read_text())["model"]
+    model = result["model"]
+    # Issue 28's targets: K and ωn within 0.3 %, ζ within 1 %, each 95 % interval holding the truth; the
+    # dead time (the stand's LED's switches give each dwell's t0) within 0.5 ms. Its interval is not
+    # asserted: on these 0.6 s dwells (the 1.5 Hz one warned "transient beyond half the record") the
+    # phases put it 0.12 ms off with ±0.12 ms stated, the colour twin's alike (the closing note of #28).
+    for name, rel in (("gain", 0.003), ("natural_frequency_rad_s", 0.003), ("damping_ratio", 0.01)):
+        assert model[name] == pytest.approx(truth[name], rel=rel), name
+        lo, hi = model["ci95"][name]
+        assert lo <= truth[name] <= hi, name
+    assert abs(model["dead_time_s"] - truth["dead_time_s"]) < 0.5e-3
+
+
+@pytest.mark.parametrize("which", ["tiff12", "mraw12"])
+def test_monochrome_report_renders_in_chromium(mono, mraw, which, tmp_path):
     browser = pytest.importorskip("report.test_report_browser")  # its chromium checks; skips without chromium
     if browser.CHROMIUM is None:
         pytest.skip("Debian's chromium is not on PATH")
-    report = mono[12][1] / "report.html"
+    report = (mono[12][1] if which == "tiff12" else mraw[1]) / "report.html"
     probe = browser._probe(report, tmp_path)
     assert probe["errors"] == [] and probe["undecoded"] == [] and probe["images"] >= 3
     assert browser._console_lines(report, tmp_path) == []

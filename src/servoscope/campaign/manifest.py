@@ -418,6 +418,9 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     labels: dict[str, int] = {}
     videos: dict[Path, int] = {}
     skipped: list[tuple[str, str]] = []
+    # A camera's program names every recording's file alike (Photron's C001H001S0001.cihx, one folder
+    # per recording; the twin's frames.cih): where raw files' stems repeat, their folders name them.
+    stems = [Path(str(e["frames"]).split("#")[0]).stem for e in raw_tests if isinstance(e, dict) and "frames" in e]
     for i, entry in enumerate(raw_tests, start=1):
         where = f"tests[{i}]"
         if not isinstance(entry, dict):
@@ -430,6 +433,9 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
             try:
                 video = manifest_frame_source(entry, base)
                 default_label = source_name(video)
+                raw = Path(str(entry["frames"]).split("#")[0])
+                if stems.count(raw.stem) > 1 and raw.stem == default_label and raw.parent.name:
+                    default_label = raw.parent.name
             except ServoscopeError as exc:
                 problems.add(f"{where}.frames", str(exc))
                 video, default_label = None, f"test{i}"
@@ -475,7 +481,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
             problems.add(f"{where}.label", "must be non-empty text without slashes")
             ok = False
         elif label in labels:
-            problems.add(f"{where}.label", f"{label!r} is also the label of tests[{labels[label]}]")
+            problems.add(f"{where}.label", f"{label!r} is also the label of tests[{labels[label]}]: give each test "
+                         "its own label = \"…\"")
             ok = False
         else:
             labels[label] = i

@@ -47,6 +47,19 @@ ZETA_RANGE = (1e-4, 20.0)
 #: (at 100x the top frequency a pole changes the phase there by < 0.6 deg).
 FREQ_MARGIN = 1e2
 
+
+def delay_limit_s(w_min: float) -> float:
+    """The longest dead time a fit considers (s): one period of the lowest dwell, at least 1 s.
+
+    The dwells' phases tell the delay modulo a whole turn at each frequency; beyond one
+    period of the lowest there are aliases (the phases of 1.5, 4 and 10 Hz repeat every
+    2 s) that fit as well, and the solver was seen to end on one (31.4 s for 85 ms on a
+    three-dwell campaign). The delay's seeds span this range, and a local fit that ends
+    beyond it is not taken (a hard limit instead would stall the solver's path there).
+    """
+    return max(1.0, 2.0 * math.pi / w_min)
+
+
 _QUAD_NAMES_SINGLE = ("natural_frequency_rad_s", "damping_ratio")
 
 
