@@ -50,7 +50,7 @@ def track_in_view(name: str, result, self_calibrate: bool, camera=None, plane: P
     """
     view = pooled_view([result], camera, plane)
     if not self_calibrate:
-        said = view_warning(view, plane=result.plane)
+        said = view_warning(view, plane=result.plane, lens=camera is not None or plane is not None)
         if said:
             result.warnings.append(said)
         return result

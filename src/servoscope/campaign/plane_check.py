@@ -47,7 +47,8 @@ def campaign_in_view(campaign: Campaign, tracks: dict[str, Track], self_calibrat
     view = pooled_view(ordered, campaign.camera, campaign.plane)
     plane = campaign.plane
     if not self_calibrate:
-        said = view_warning(view, plane=None if plane is None else (plane.source or "plane.json"))
+        said = view_warning(view, plane=None if plane is None else (plane.source or "plane.json"),
+                            lens=campaign.camera is not None or plane is not None)
         if said:
             warnings.insert(0, said)
         if plane is not None and plane.angle_gain_std > 0:

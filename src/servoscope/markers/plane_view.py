@@ -119,7 +119,7 @@ def _principal_point(track: Track, camera: CameraModel | None, plane: Plane | No
     return float(c[0, 0]), float(c[0, 1])
 
 
-def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = "") -> str | None:
+def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = "", lens: bool = True) -> str | None:
     """The warning a view earns, or None: off square without a plane, or a plane that does not fit.
 
     Parameters
@@ -130,6 +130,10 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
         The plane the positions were measured in (None: the image); with one, nothing is said.
     where : str
         What to name the command after (``"servoscope plane board.jpg --board 9x6 --square 25"``).
+    lens : bool
+        Whether the track was made with a lens model. Without one the lens's own distortion
+        stretches the stickers off the picture's centre as a view does (a square-on twin with a
+        barrel lens of k1 = −0.08 read 9°, 95 %: 1–17°), and the warning says so.
     """
     if view is None or not view.determined:
         return None  # stickers that are not round or square tell nothing of the view
@@ -141,8 +145,11 @@ def view_warning(view: ObliqueView | None, *, plane: str | None, where: str = ""
         return None
     how = where or "servoscope plane BOARD_PHOTO --board COLSxROWS --square MM --out plane.json"
     if plane is None:
+        unsure = ("; with no lens calibration given, the lens's own distortion may be what the stickers show: "
+                  "calibrate the lens first (servoscope calibrate, then [camera] calibration or --calibration)"
+                  if not lens else "")
         return (f"{view.describe()}; calibrate the plane: photograph a chessboard held against the blade with "
-                f"this camera, run `{how}` and name it in [camera] plane (or track --plane)")
+                f"this camera, run `{how}` and name it in [camera] plane (or track --plane){unsure}")
     # In a plane (a board photo's, or self-calibrated) the stickers' own estimate is no check: carried
     # into the plane, the tracker's isotropic spread of about 1 px² turns anisotropic and read 8–11° at
     # 30° off square with the board's plane right to 0.02 % in K (docs/accuracy.md).
