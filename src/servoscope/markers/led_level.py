@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 from numba import njit
 
+from ..video.native import sample_at
 from ..video.reader import VideoInfo
 from .colour import ColourModel, seed_model
 from .led_timing import frame_period_s, led_switch_time
@@ -129,6 +130,57 @@ def _disk_level(Y, cx, cy, r):
     if n == 0:
         return math.nan, math.nan
     return total / n, peak
+
+
+@njit(cache=True, nogil=True)
+def _disk_native(img, packed, width, cx, cy, r):
+    """:func:`disk_level` on a monochrome frame's native samples (:func:`~servoscope.video.native.sample_at`).
+
+    The same loop and arithmetic as :func:`_disk_level` (no fastmath): the same levels to the bit.
+    """
+    if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
+        return math.nan, math.nan
+    h = img.shape[0]
+    w = width
+    x0, x1 = max(0, int(math.floor(cx - r))), min(w, int(math.floor(cx + r)) + 1)
+    y0, y1 = max(0, int(math.floor(cy - r))), min(h, int(math.floor(cy + r)) + 1)
+    total = 0.0
+    peak = -math.inf
+    n = 0
+    for i in range(y0, y1):
+        dy = (i - cy) * (i - cy)
+        for j in range(x0, x1):
+            if (j - cx) * (j - cx) + dy <= r * r:
+                v = sample_at(img, i, j, packed)
+                total += v
+                n += 1
+                if v > peak:
+                    peak = v
+    if n == 0:
+        return math.nan, math.nan
+    return total / n, peak
+
+
+@njit(cache=True, nogil=True)
+def disks_native(img, packed, width, xs, ys, rs, us, vs, axes, out):
+    """The LED candidates' disks on a frame's native samples, in one call (the LED search's :meth:`measure_native`).
+
+    Row k of ``out``: mean and peak of candidate k's disk where it was found
+    (``xs``, ``ys``, radius ``rs``), then where the markers carry it (``us``,
+    ``vs`` in the markers' frame, placed by ``axes`` = (trail x, trail y, the
+    axis's unit x, y, its length, 1); NaN when ``axes[5]`` is 0: a marker is missing).
+    """
+    for k in range(xs.size):
+        out[k, 0], out[k, 1] = _disk_native(img, packed, width, xs[k], ys[k], rs[k])
+        if axes[5] == 0.0:
+            out[k, 2] = math.nan
+            out[k, 3] = math.nan
+            continue
+        ox, oy, ex, ey, length = axes[0], axes[1], axes[2], axes[3], axes[4]
+        u, v = us[k], vs[k]
+        # As LedSearch.measure places it, operation for operation (Python's float arithmetic is IEEE's).
+        out[k, 2], out[k, 3] = _disk_native(img, packed, width, ox + length * (u * ex - v * ey),
+                                            oy + length * (u * ey + v * ex), rs[k])
 
 
 def led_row_px(rgb: np.ndarray, led_spec, info: VideoInfo) -> float | None:

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, disk_level, input_start
+from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, disk_level, disks_native, input_start
 from .moments import Moments
 
 __all__ = ["LED_STAY_FRAMES", "LedCandidate", "LedSearch", "led_input_start", "switch_of"]
@@ -87,6 +87,7 @@ class LedSearch:
         self.candidates = candidates
         self.first_frame = first_frame
         self.near = near
+        self._native: tuple | None = None  # measure_native's arrays, made on its first call
 
     @classmethod
     def find(cls, rgb: np.ndarray, model, lead: Moments, trail: Moments, first_frame: int,
@@ -112,6 +113,49 @@ class LedSearch:
             found.append(LedCandidate(float(cents[1 + i][0]), float(cents[1 + i][1]), math.sqrt(areas[i] / math.pi),
                                       np.array([d @ e, d @ nrm]) / length))
         return cls(found, first_frame, near)
+
+    def measure_native(self, samples: np.ndarray, packed: bool, width: int, lead: Moments | None,
+                       trail: Moments | None) -> None:
+        """:meth:`measure` on a monochrome frame's native samples, every candidate's disks in one compiled call.
+
+        The same levels to the bit as :meth:`measure` on the samples (or their
+        unpacking). A packed 12-bit frame is read where the disks are, not
+        unpacked whole each frame (a 1024×1024 packed MRAW with an LED: the whole
+        track 2.1× faster); on 16-bit words one call instead of two a candidate
+        (one candidate: 4.4 against 5.2 µs a frame).
+
+        Parameters
+        ----------
+        samples, packed, width
+            A :class:`~servoscope.video.native.NativeFrame`'s.
+        lead, trail : Moments or None
+        """
+        if self._native is None:
+            cs = self.candidates
+            self._native = (np.array([c.x_px for c in cs], np.float64), np.array([c.y_px for c in cs], np.float64),
+                            np.array([1.5 * c.radius_px + 1.0 for c in cs], np.float64),
+                            np.array([float(c.local[0]) for c in cs]), np.array([float(c.local[1]) for c in cs]),
+                            np.zeros(6), np.empty((len(cs), 4)))
+        xs, ys, rs, us, vs, axes, out = self._native
+        both = lead is not None and trail is not None
+        if both:
+            ox, oy = trail.x_px, trail.y_px  # type: ignore[union-attr]
+            ax, ay = lead.x_px - ox, lead.y_px - oy  # type: ignore[union-attr]
+            length = math.hypot(ax, ay)  # Python's hypot, as measure's
+            axes[:] = (ox, oy, ax / length, ay / length, length, 1.0)
+        else:
+            axes[5] = 0.0
+        disks_native(samples, packed, width, xs, ys, rs, us, vs, axes, out)
+        for c, (level, peak, borne, borne_peak) in zip(self.candidates, out.tolist()):
+            c.fixed.append(level)
+            if len(c.peak_fixed) < LED_PEAK_FRAMES:
+                c.peak_fixed.append(peak)
+            if not both:
+                c.borne.append(math.nan)
+                continue
+            c.borne.append(borne)
+            if len(c.peak_borne) < LED_PEAK_FRAMES:
+                c.peak_borne.append(borne_peak)
 
     def measure(self, image: np.ndarray, lead: Moments | None, trail: Moments | None) -> None:
         """Each candidate's level in this frame (``image``: luma, or RGB), fixed and carried by the markers."""

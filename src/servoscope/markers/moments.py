@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -35,9 +36,13 @@ class Moments:
     mu11: float
     mu02: float
 
-    @property
+    @cached_property
     def axes_px(self) -> tuple[float, float]:
-        """Standard deviations along the major and minor axes (px)."""
+        """Standard deviations along the major and minor axes (px).
+
+        Computed once per instance (a frozen instance's value never changes): a
+        marker's shape check and its acceptance both read it every frame.
+        """
         common = 0.5 * (self.mu20 + self.mu02)
         diff = math.hypot(0.5 * (self.mu20 - self.mu02), self.mu11)
         return math.sqrt(max(common + diff, 0.0)), math.sqrt(max(common - diff, 0.0))

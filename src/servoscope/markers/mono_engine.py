@@ -16,9 +16,19 @@ on the 12-bit twin the two agree to their estimators' difference (0.02–0.04 px
 RMS: the RGB engine's nearest-ring background is itself 0.015–0.02 px noisy)
 plus the rounding this one removes (0.001 px at full light, 0.016 px lit at 10 %).
 
-Not done here: the frames' illumination gain (the YUV engine's flicker
-correction; the RGB engine has none either) and rectangular stickers' own
-support (a rectangle is measured in a disk around it).
+Each frame's illumination gain against the first frame's
+(:class:`~.illumination.NativeGain`: lamp flicker, which a high-speed camera
+sees frame by frame) scales the markers' learned level and class threshold
+about black, as the YUV engine scales its learned colours: the unmixing's
+``α = (p − b)/(M − b)`` with the first frame's ``M`` would read a dim frame's
+sticker as smaller ("partly hidden"). Within the dead band
+(:data:`~.illumination.GAIN_DEADBAND`) nothing is scaled: steady footage is
+tracked bit for bit as without it. The LED's level is not scaled: it emits
+its own light (its unlit level follows the lamps, as in the YUV engine).
+
+Not done here: a rolling shutter's bands (:class:`~.illumination.BandGain`,
+the YUV engine's) and rectangular stickers' own support (a rectangle is
+measured in a disk around it).
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ from .centroid import SoftCentroid
 from .colour import BRIGHTNESS, BrightnessModel
 from .first_frame import choose_first, nothing_matches
 from .frame_record import EngineInput, FrameRecord, TrackLog
+from .illumination import GAIN_DEADBAND, NativeGain, varied_warning
 from .kernel_mono import MONO_LED_NQ, MONO_NP, MP, mono_led_level, track_frame_mono
 from .led_level import LED_PEAK_FRAMES, locate_led
 from .led_search import follow_candidates
@@ -67,11 +78,18 @@ CLASS_STEP_MIN_REACH_PX = 6.0
 
 
 class _MonoState:
-    """A marker's parameter row (:class:`~.kernel_mono.MP`) and its class area in the first frame."""
+    """A marker's parameter row (:class:`~.kernel_mono.MP`) and its class area in the first frame.
+
+    ``radius`` and ``edge`` repeat the row's support radius and the class's last
+    sampled offset (1 + STEP) as Python floats: :func:`_blob` reads them twice a
+    frame, and arithmetic on NumPy scalars costs several times more.
+    """
 
     def __init__(self) -> None:
         self.prm = np.zeros(MONO_NP)
         self.class_area: float | None = None
+        self.radius = 0.0
+        self.edge = 1.0
 
 
 def _core(frame: NativeFrame, m: Moments, r: float) -> np.ndarray:
@@ -105,6 +123,8 @@ def _learn(tracker: MarkerTracker, frame: NativeFrame, m: Moments, margin_px: fl
     prm[MP.VAR] = (1.4826 * mad) ** 2 + 1.0 / 12.0
     prm[MP.ALPHA_LO], prm[MP.ALPHA_HI] = ALPHA_RANGE
     prm[MP.MIN_CONTRAST] = MIN_CONTRAST_DN8 * dn8
+    tracker.mono.radius = float(prm[MP.RADIUS])
+    tracker.mono.edge = 1.0 + float(prm[MP.STEP])
 
 
 def _window(tracker: MarkerTracker, shape, centre=None) -> tuple[int, int, int, int] | None:
@@ -139,28 +159,43 @@ def _blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob | None
         return None
     h, w = shape
     x0, y0, x1, y1 = window
-    last = 1.0 + tracker.mono.prm[MP.STEP]  # the class's last sampled column (row) may be STEP − 1 from the edge
+    last = tracker.mono.edge  # the class's last sampled column (row) may be STEP − 1 from the edge
     if ((row[Q.XMIN] < x0 + 1 and x0 > 0) or (row[Q.YMIN] < y0 + 1 and y0 > 0)
             or (row[Q.XMAX] > x1 - last and x1 < w) or (row[Q.YMAX] > y1 - last and y1 < h)):
         return None  # cut by the window (not the image): part of something larger, look wider
     if math.hypot(row[Q.X] - row[Q.BX], row[Q.Y] - row[Q.BY]) > 0.5 * tracker.extent_px + 2.0:
         return None
     m = Moments(row[Q.M00], row[Q.X], row[Q.Y], row[Q.MU20], row[Q.MU11], row[Q.MU02])
-    radius = float(tracker.mono.prm[MP.RADIUS])
+    radius = tracker.mono.radius
     support_out = m.x_px - radius < 0 or m.y_px - radius < 0 or m.x_px + radius > w - 1 or m.y_px + radius > h - 1
     at_border = bool(support_out or row[Q.RING_N] < 8)
     soft = SoftCentroid(m, math.sqrt(0.5 * (row[Q.VAR_X] + row[Q.VAR_Y])), radius, row[Q.CONTRAST], 0.0, at_border)
     return Blob(m, soft.sigma_px, tracker.flaw(soft))
 
 
+def _apply_gain(prm: np.ndarray, gain: float, black: float) -> None:
+    """Scale a marker's learned level and class threshold in its kernel row (:class:`~.kernel_mono.MP`) to this
+    frame's light, about the samples' black level.
+
+    The threshold too: the whole scene's light scales, so the class (the coarse
+    centre, the area check, the ring's exclusion of the marker's pixels) keeps the
+    first frame's cut between sticker and background. Within
+    :data:`~servoscope.markers.illumination.GAIN_DEADBAND` of 1 the row is left as it is.
+    """
+    if abs(gain - 1.0) <= GAIN_DEADBAND:
+        return
+    prm[MP.LEVEL] = black + gain * (prm[MP.LEVEL] - black)
+    prm[MP.THRESHOLD] = black + gain * (prm[MP.THRESHOLD] - black)
+
+
 @njit(cache=True, nogil=True)
-def _same_samples(a, b) -> bool:
-    """Whether two frames' samples are equal, the middle rows first (a differing frame differs there at once)."""
+def _same_samples(a, b, start) -> bool:
+    """Whether two frames' samples are equal, from row ``start`` on (a differing frame differs there at once)."""
     if a.shape != b.shape:
         return False
     h = a.shape[0]
     for k in range(h):
-        i = (h // 2 + k) % h
+        i = (start + k) % h
         for j in range(a.shape[1]):
             if a[i, j] != b[i, j]:
                 return False
@@ -213,10 +248,14 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
     learned = False
     first: dict[str, Blob] = {}
     progress = job.progress
+    gain_of = NativeGain()
+    gain = 1.0  # this frame's illumination against the first frame's (see illumination.py)
+    gains: list[float] = []
 
     def measure_one(k: int, frame: NativeFrame, window, centre=None) -> Blob | None:
         one = np.zeros((2, MONO_NP))
         one[k] = trackers[k].mono.prm
+        _apply_gain(one[k], gain, frame.black)
         one[k, MP.X0:MP.Y1 + 1] = window
         if centre is not None:
             one[k, MP.CX], one[k, MP.CY], one[k, MP.USE_CENTRE] = centre[0], centre[1], 1.0
@@ -229,9 +268,8 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
     for frame in iter_native_frames(path):
         shape = frame.shape
         samples = frame.samples
-        # A duplicated frame: the same samples under a new timestamp.
-        repeated = prev is not None and _same_samples(prev, samples)
-        prev = samples
+        gain = gain_of(frame)
+        gains.append(gain)
         found: dict[str, Blob] = {}
         reason = ""
         slow = False
@@ -271,9 +309,16 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
             if window is None:
                 params[k, MP.ENABLED] = 0.0
             else:
+                _apply_gain(params[k], gain, frame.black)
                 params[k, MP.X0:MP.Y1 + 1] = window
         led_prm[0] = 1.0 if led_local is not None else 0.0
         track_frame_mono(samples, frame.packed, frame.width, params, led_prm, out, led_out)
+        # A duplicated frame: the same samples under a new timestamp. Compared from a row the kernel has just
+        # read: a memory-mapped frame's pages are mapped on their first read, and the middle row's may be
+        # one no window touches (a differing frame differs in its first row compared, whichever it is).
+        start = windows[0][1] if windows[0] is not None else shape[0] // 2
+        repeated = prev is not None and _same_samples(prev, samples, start)
+        prev = samples
         for k, tracker in enumerate(trackers):
             blob = _blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
             if blob is None:
@@ -296,8 +341,14 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
             found[tracker.name] = blob
             reason = reason or blob.flaw
         led_level = led_peak = None
-        if led_model is not None or log.led_search is not None:
-            # Packed 12-bit samples unpacked for it (its disks are read by a compiled loop on an array).
+        if log.led_search is not None:
+            # Every candidate's disks in one compiled call on the samples as stored (packed ones too).
+            lead_b, trail_b = found.get("lead"), found.get("trail")
+            log.led_search.measure_native(samples, frame.packed, frame.width,
+                                          None if lead_b is None else lead_b.moments,
+                                          None if trail_b is None else trail_b.moments)
+        elif led_model is not None:
+            # Found in the first frame with both markers (and measured there): packed samples unpacked, once.
             follow_candidates(log, frame.gray if frame.packed else samples, lambda: frame.rgb, led_model, found,
                               settings.led_near)
         if led_model is not None:
@@ -322,3 +373,6 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
             progress(frame.index + 1)
     if prev is not None:
         _candidates_in_8bit(log.led_search, frame)
+    varied = varied_warning(gains, "the markers' levels")
+    if varied:
+        log.warnings.append(varied)

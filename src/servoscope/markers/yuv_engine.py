@@ -23,7 +23,7 @@ from .colour import AUTO, ycbcr_bt601
 from .first_frame import choose_first, nothing_matches, take_auto_colours
 from .frame_checks import same_image
 from .frame_record import EngineInput, FrameRecord, TrackLog
-from .illumination import GAIN_DEADBAND, BandGain, GlobalGain, scale_colour
+from .illumination import GAIN_DEADBAND, BandGain, GlobalGain, scale_colour, varied_warning
 from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
@@ -432,13 +432,9 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
                             repeated, lambda frame=frame: frame.rgb, led_level, led_peak))
         if job.progress is not None and frame.index % 50 == 0:
             job.progress(frame.index + 1)
-    corrected = [g for g in gains if abs(g - 1.0) > GAIN_DEADBAND]
-    if corrected:
-        lo, hi = min(gains), max(gains)
-        log.warnings.append(f"illumination varied ({100 * (lo - 1):+.1f} % to {100 * (hi - 1):+.1f} % of the first "
-                        f"frame's: flicker, auto-exposure or clouds) in {len(corrected)} of {len(gains)} frames; "
-                        "the markers' colours were scaled with it"
-                        + (" (each by the light of its band of sensor rows: a rolling shutter)" if band_of else ""))
+    varied = varied_warning(gains, "the markers' colours", band_of is not None)
+    if varied:
+        log.warnings.append(varied)
 
 
 def _apply_gain(prm: np.ndarray, gain: float) -> None:
