@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["FASTMATH", "LED_NP", "LED_NQ", "N_BINS", "NP", "NQ", "P", "Q", "atan2_nb", "atan2_np",
-           "chroma_window", "chroma_window_nb", "led_centre"]
+           "chroma_window", "chroma_window_nb", "led_centre", "soft_moments_out"]
 
 #: Angular bins of the background ring.
 N_BINS = 48
@@ -131,6 +131,42 @@ def led_centre(out, led):
     cx = ox + length * (led[1] * ex + led[2] * nx)
     cy = oy + length * (led[1] * ey + led[2] * ny)
     return cx, cy
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
+def soft_moments_out(buf, ns, ia, iva, m00, m10, m01, cx, cy, c2s, out):
+    """A marker's soft centroid, central second moments and their noise into its output row.
+
+    ``buf[:ns]`` holds each support pixel's offset from the centre (cx, cy) in columns 0
+    and 1, its membership in column ``ia`` and the membership's variance in ``iva``;
+    ``m00, m10, m01`` are the membership's raw sums, ``c2s`` the sum of the squared
+    contrasts. Shared by the colour and the monochrome kernels, whose unmixing differs
+    and whose moments do not (inlined: the same operations, in the same order, in each).
+    """
+    xb = m10 / m00
+    yb = m01 / m00
+    m20 = 0.0
+    m11 = 0.0
+    m02 = 0.0
+    vx = 0.0
+    vy = 0.0
+    for s in range(ns):
+        ex = buf[s, 0] - xb
+        ey = buf[s, 1] - yb
+        a = buf[s, ia]
+        m20 += a * ex * ex
+        m11 += a * ex * ey
+        m02 += a * ey * ey
+        vx += buf[s, iva] * ex * ex
+        vy += buf[s, iva] * ey * ey
+    out[7] = cx + xb
+    out[8] = cy + yb
+    out[9] = m20 / m00
+    out[10] = m11 / m00
+    out[11] = m02 / m00
+    out[12] = vx / (m00 * m00)
+    out[13] = vy / (m00 * m00)
+    out[14] = math.sqrt(c2s / ns) if ns > 0 else 0.0
 
 
 def chroma_window(prm, row_off, row_step, hc, wc):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernel_layout import FASTMATH, N_BINS, atan2_nb, chroma_window_nb, led_centre
+from .kernel_layout import FASTMATH, N_BINS, atan2_nb, chroma_window_nb, led_centre, soft_moments_out
 
 __all__ = ["led_level_numba", "track_frame_numba"]
 
@@ -404,30 +404,7 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
         out[21] = ring_y / ring_n if have_bg else math.nan
         if not m00 > 0.0:
             return
-        xb = m10 / m00
-        yb = m01 / m00
-        m20 = 0.0
-        m11 = 0.0
-        m02 = 0.0
-        vx = 0.0
-        vy = 0.0
-        for s in range(ns):
-            ex = buf[s, 0] - xb
-            ey = buf[s, 1] - yb
-            a = buf[s, 5]
-            m20 += a * ex * ex
-            m11 += a * ex * ey
-            m02 += a * ey * ey
-            vx += buf[s, 6] * ex * ex
-            vy += buf[s, 6] * ey * ey
-        out[7] = cx + xb
-        out[8] = cy + yb
-        out[9] = m20 / m00
-        out[10] = m11 / m00
-        out[11] = m02 / m00
-        out[12] = vx / (m00 * m00)
-        out[13] = vy / (m00 * m00)
-        out[14] = math.sqrt(c2s / ns) if ns > 0 else 0.0
+        soft_moments_out(buf, ns, 5, 6, m00, m10, m01, cx, cy, c2s, out)
         cx = out[7]
         cy = out[8]
 
