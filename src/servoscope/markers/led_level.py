@@ -107,36 +107,15 @@ def disk_level(Y, cx: float, cy: float, r: float) -> tuple[float, float]:
     """
     if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
         return math.nan, math.nan
-    return _disk_level(Y, float(cx), float(cy), float(r))
-
-
-@njit(cache=True, nogil=True)
-def _disk_level(Y, cx, cy, r):
-    h, w = Y.shape
-    x0, x1 = max(0, int(math.floor(cx - r))), min(w, int(math.floor(cx + r)) + 1)
-    y0, y1 = max(0, int(math.floor(cy - r))), min(h, int(math.floor(cy + r)) + 1)
-    total = 0.0
-    peak = -math.inf
-    n = 0
-    for i in range(y0, y1):
-        dy = (i - cy) * (i - cy)
-        for j in range(x0, x1):
-            if (j - cx) * (j - cx) + dy <= r * r:
-                v = float(Y[i, j])
-                total += v
-                n += 1
-                if v > peak:
-                    peak = v
-    if n == 0:
-        return math.nan, math.nan
-    return total / n, peak
+    return _disk_native(Y, False, Y.shape[1], float(cx), float(cy), float(r))
 
 
 @njit(cache=True, nogil=True)
 def _disk_native(img, packed, width, cx, cy, r):
     """:func:`disk_level` on a monochrome frame's native samples (:func:`~servoscope.video.native.sample_at`).
 
-    The same loop and arithmetic as :func:`_disk_level` (no fastmath): the same levels to the bit.
+    Packed 12-bit rows decoded where read; ``packed`` False: ``img`` is the samples themselves (any
+    2-D array: a video's luma plane, 8- or 16-bit words).
     """
     if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
         return math.nan, math.nan
