@@ -28,6 +28,7 @@ from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
+from .refind import refind
 
 __all__ = ["run_yuv"]
 
@@ -395,16 +396,10 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
                 # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
                 # then measure it with the kernel around what was found.
                 slow = True
-                rgb_blob, why = tracker.find(frame.rgb)
-                if rgb_blob is not None:
-                    m = rgb_blob.moments
-                    blob = measure_one(k, frame, _window(tracker, shape, (m.x_px, m.y_px)), (m.x_px, m.y_px))
-                    if blob is None:
-                        blob = rgb_blob
-                        out[k, K.Q.M00], out[k, K.Q.X], out[k, K.Q.Y] = m.m00, m.x_px, m.y_px
-                else:
-                    out[k, K.Q.M00] = 0.0
-                    tracker.lose()
+                blob, why = refind(tracker, frame.rgb,
+                                   lambda c, k=k, tracker=tracker: measure_one(k, frame, _window(tracker, shape, c), c),
+                                   out[k])
+                if blob is None:
                     reason = reason or why
                     continue
             tracker.accept(blob, None)
