@@ -167,3 +167,49 @@ def cli(capsys, *args) -> tuple[int, str, str]:
         code = int(exc.code or 0)
     out = capsys.readouterr()
     return code, out.out, out.err
+
+
+def run_cli(*args, cwd=None) -> "subprocess.CompletedProcess[str]":
+    """``python -m servoscope ARGS`` in this process, as the command-line tests ran it in a child.
+
+    Starting an interpreter that imports servoscope costs ~2.5 s of CPU a call; the command's own
+    entry point (``servoscope.cli.main``: its exit codes and one-line errors) runs here instead, with
+    stdout and stderr captured, Python's default warning filters (a warning is printed to stderr, as
+    the child printed it, not raised or kept by pytest) and ``cwd`` as the working folder.
+    Returns what ``subprocess.run(..., capture_output=True, text=True)`` returned.
+    """
+    import contextlib
+    import io
+    import subprocess
+    import warnings
+
+    from servoscope.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        err.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    argv = [str(a) for a in args]
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(warnings.catch_warnings())
+        warnings.resetwarnings()  # the interpreter's defaults, as in a child started without -W
+        for action, category, module in (("ignore", ResourceWarning, ""), ("ignore", ImportWarning, ""),
+                                         ("ignore", PendingDeprecationWarning, ""),
+                                         ("ignore", DeprecationWarning, ""),
+                                         ("default", DeprecationWarning, "__main__")):
+            warnings.filterwarnings(action, category=category, module=module)
+        warnings.showwarning = show
+        if cwd is not None:
+            stack.enter_context(contextlib.chdir(cwd))
+        stack.enter_context(contextlib.redirect_stdout(out))
+        stack.enter_context(contextlib.redirect_stderr(err))
+        try:
+            main(argv)
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            if not isinstance(exc.code, (int, type(None))):
+                err.write(f"{exc.code}\n")
+    return subprocess.CompletedProcess(["servoscope", *argv], code, out.getvalue(), err.getvalue())
+

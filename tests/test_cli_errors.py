@@ -1,18 +1,11 @@
 """Bad input on the command line: exit 2, one line, no traceback, nothing written."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from support import GOOD, tiny_video as _tiny_video
-
-
-def run_cli(*args, cwd=None):
-    return subprocess.run(
-        [sys.executable, "-m", "servoscope", *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=120
-    )
+# run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).
+from support import GOOD, run_cli, tiny_video as _tiny_video
 
 
 CASES = {

@@ -163,15 +163,13 @@ def test_twin_without_blur_says_not_seen_and_bounds_it(tmp_path):
 
 
 def test_track_command_says_what_the_blur_shows(tmp_path):
-    import subprocess
-    import sys
+    from support import run_cli  # the command's entry point in this process, as a child ran it
 
     from servoscope.simulate import simulate_campaign
 
     simulate_campaign(tmp_path, "quick", 0, width=480, height=384, codec="raw", exposure_s=0.01, motion_blur=True,
                       frequencies_hz=(1.0,))
-    out = subprocess.run([sys.executable, "-m", "servoscope", "track", str(tmp_path / "step.avi"), "--out",
-                          str(tmp_path / "step.csv")], capture_output=True, text=True, timeout=300)
+    out = run_cli("track", str(tmp_path / "step.avi"), "--out", str(tmp_path / "step.csv"))
     assert out.returncode == 0, out.stderr
     line = next(line for line in out.stdout.splitlines() if "exposure:" in line)
     ms = float(re.search(r"exposure ([0-9.]+) ms", line).group(1))

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 from dataclasses import replace
 from pathlib import Path
@@ -29,17 +27,13 @@ from servoscope.markers.tracker import TrackerSettings, track_video
 from servoscope.simulate import PAPER_SERVO, PRESETS, FrameRenderer, Scene, simulate_campaign
 from servoscope.video.writer import rgb_to_yuv420p
 
-from support import GOOD, tiny_video as _tiny_video
+# run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).
+from support import GOOD, run_cli, tiny_video as _tiny_video
 
 READOUT_S = 0.015
 FPS = 50  # a camcorder's rate: a 15 ms readout fits in its 20 ms frame interval
 LED_OFFSET_PX = 230.0
 FREQUENCIES_HZ = (2.0, 4.0, 7.0, 12.0)
-
-
-def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "servoscope", *map(str, args)], capture_output=True, text=True,
-                          timeout=120)
 
 
 # -- renderer ---------------------------------------------------------------------

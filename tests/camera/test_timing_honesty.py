@@ -153,11 +153,9 @@ def test_short_shutter_given_intervals_hold_the_truth(tmp_path):
 
 
 def _cli(*args):
-    import subprocess
-    import sys
+    from support import run_cli
 
-    return subprocess.run([sys.executable, "-m", "servoscope", *map(str, args)], capture_output=True, text=True,
-                          timeout=120)
+    return run_cli(*args)  # the command's entry point in this process: no interpreter to start a call
 
 
 @pytest.mark.parametrize("camera, expected", [
@@ -195,17 +193,29 @@ def test_track_refuses_an_impossible_shutter(tmp_path, exposure, expected):
     assert not out.exists()
 
 
+@pytest.fixture(scope="module")
+def one_phase_campaign(tmp_path_factory):
+    """The footage of the test below, rendered once: the manifest with the exposure, and one without it."""
+    from servoscope.simulate import simulate_campaign
+
+    toml = simulate_campaign(tmp_path_factory.mktemp("onephase"), "quick", 1, fps=200, exposure_s=0.0001,
+                             width=480, height=384, t0_frame_phase=0.3)
+    # What manifest_exposure=False writes (the frames are the same): campaign.toml less its exposure_s line.
+    hidden = toml.with_name("campaign_hidden_exposure.toml")
+    hidden.write_text(re.sub(r"\nexposure_s = .*", "", toml.read_text()))
+    assert hidden.read_text() != toml.read_text()
+    return {True: toml, False: hidden}
+
+
 @pytest.mark.parametrize("given", [True, False])
-def test_switches_at_one_point_of_the_frame_clock_are_a_shared_error(tmp_path, given):
+def test_switches_at_one_point_of_the_frame_clock_are_a_shared_error(one_phase_campaign, given):
     """The issue's second case: a 0.1 ms shutter at 200 frames/s and every switch at the same
     sub-frame phase (one script starts camera and input): every dwell's t0 is off by the same
     +1 ms, which no averaging over dwells removes. The intervals must say so."""
     from servoscope.campaign.runner import identify
-    from servoscope.simulate import simulate_campaign
 
-    toml = simulate_campaign(tmp_path, "quick", 1, fps=200, exposure_s=0.0001, width=480, height=384,
-                             t0_frame_phase=0.3, manifest_exposure=given)
-    truth = json.loads((tmp_path / "truth.json").read_text())
+    toml = one_phase_campaign[given]
+    truth = json.loads((toml.parent / "truth.json").read_text())
     res = identify(toml)
     s = res.summary()
     true_t0 = {t["video"]: t["t0_s"] for t in truth["tests"]}

@@ -202,20 +202,17 @@ def test_a_rolling_shutter_is_said_beside_the_bending(tmp_path):
 
 def test_command_line_extra_markers(tmp_path):
     """`servoscope track --extra`: the bending line and columns; a colour of another marker's: one line, exit 2."""
-    import subprocess
-    import sys
+    from support import run_cli  # the command's entry point in this process, as a child ran it
 
     _, truth = _render(tmp_path, frequencies_hz=(), extra_stickers=EXTRAS[:1], step_after_t0_s=0.4)
     video = tmp_path / truth["tests"][0]["video"]
-    run = [sys.executable, "-m", "servoscope", "track", str(video)]
-    ok = subprocess.run(run + ["--extra", "#1f77b4", "--out", str(tmp_path / "t.csv")], capture_output=True,
-                        text=True, timeout=300)
+    run = ["track", str(video)]
+    ok = run_cli(*run, "--extra", "#1f77b4", "--out", str(tmp_path / "t.csv"))
     assert ok.returncode == 0, ok.stderr
     assert "bending across the lead–trail line, RMS: extra1 (#1f77b4)" in ok.stdout
     header = (tmp_path / "t.csv").read_text().splitlines()[0].split(",")
     assert {"extra1_x_px", "extra1_y_px", "extra1_bending_px", "lead_bending_px"} <= set(header)
-    bad = subprocess.run(run + ["--extra", "#d62728", "--out", str(tmp_path / "bad.csv")], capture_output=True,
-                         text=True, timeout=300)
+    bad = run_cli(*run, "--extra", "#d62728", "--out", str(tmp_path / "bad.csv"))
     assert bad.returncode == 2 and not (tmp_path / "bad.csv").exists()
     assert bad.stderr.strip().splitlines() == [
         "servoscope: error: extra marker 1: #d62728 has the same colour as the lead marker: give each marker a "

@@ -60,57 +60,15 @@ def test_h264_intervals_contain_truth(h264_campaign, h264_tracks, fit):
 
 def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, h264_tracks, tmp_path):
     import shutil
-    import subprocess
-    import sys
+
+    from support import run_cli  # the command's entry point in this process, as a child ran it
 
     # The command finds its tracks in OUT/.cache, as a second run of it would.
     shutil.copytree(h264_tracks[2], tmp_path / "o" / ".cache")
-    proc = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(h264_campaign), "--out", str(tmp_path / "o")],
-                          capture_output=True, text=True, timeout=600)
+    proc = run_cli("identify", str(h264_campaign), "--out", str(tmp_path / "o"))
     assert proc.returncode == 0, proc.stderr
     # The table goes to stdout; the warning to stderr, naming the 15 Hz dwell.
     assert "natural frequency ωn" in proc.stdout
     assert "warning: natural frequency rests on dwell_14_15.00Hz" in proc.stderr, proc.stderr
     result = json.loads((tmp_path / "o" / "result.json").read_text())
     assert any(w.startswith("natural frequency rests on dwell_14") for w in result["warnings"])
-
-
-@pytest.fixture(scope="module")
-def camcorder_gop_campaign(tmp_path_factory):
-    import numpy as np
-
-    # An I-frame every 15 frames, as AVCHD camcorders record: the codec check has 20 a dwell.
-    return simulate_campaign(tmp_path_factory.mktemp("h264gop15"), preset="paper", seed=1, codec="h264",
-                             bit_rate=20_000_000, gop=15, frequencies_hz=tuple(np.geomspace(0.5, 15.0, 8)),
-                             include_step=False)
-
-
-@pytest.fixture(scope="module")
-def camcorder_gop_tracks(camcorder_gop_campaign):
-    from servoscope.campaign import track_campaign
-
-    campaign = load_campaign(camcorder_gop_campaign)
-    return campaign, track_campaign(campaign, workers=1)
-
-
-@pytest.mark.parametrize("fit", ["magnitude", "complex"])
-def test_camcorder_gop_codec_check(camcorder_gop_campaign, camcorder_gop_tracks, fit):
-    import dataclasses
-
-    campaign, tracks = camcorder_gop_tracks
-    truth = json.loads((camcorder_gop_campaign.parent / "truth.json").read_text())["model"]
-    checked = identify(campaign, tracks=tracks, fit=fit)
-    # The same tracks without the I-frame marks: every frame fitted alike, as before the codec check.
-    blind = identify(campaign, tracks={k: dataclasses.replace(t, intra=None) for k, t in tracks.items()}, fit=fit).model
-    model = checked.model
-    assert all(f.estimator == "intra frames" for f in checked.sine_fits.values())
-    for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
-        low, high = model.ci95[name]
-        print(f"{fit} {name}: {model.params[name]:.6g} [{low:.6g}, {high:.6g}] (all frames {blind.params[name]:.6g}), "
-              f"truth {truth[name]}")
-        assert low <= truth[name] <= high
-        # Closer to the truth than the all-frame fit, and with a narrower interval.
-        assert abs(model.params[name] - truth[name]) < 0.5 * abs(blind.params[name] - truth[name])
-        assert high - low < 0.6 * (blind.ci95[name][1] - blind.ci95[name][0])
-    assert model.params["gain"] == pytest.approx(truth["gain"], rel=0.001)
-    assert model.params["natural_frequency_rad_s"] == pytest.approx(truth["natural_frequency_rad_s"], rel=0.002)

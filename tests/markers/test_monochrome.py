@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -19,6 +17,9 @@ import pytest
 from servoscope.errors import ServoscopeError
 from servoscope.markers import TrackerSettings, track_video
 from servoscope.simulate import simulate_campaign
+
+# run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).
+from support import run_cli
 
 SMALL = dict(width=480, height=384, frames_format="tiff16", monochrome=True)
 
@@ -78,8 +79,7 @@ def test_monochrome_campaign_identifies_the_servo(tmp_path, bits, seed):
 def test_colour_markers_on_monochrome_footage_say_how_to_give_brightness(dwell, tmp_path):
     folder, _ = dwell
     out = tmp_path / "t.csv"
-    run = subprocess.run([sys.executable, "-m", "servoscope", "track", f"{folder}/dwell_01_2.00Hz/*.tif", "--fps",
-                          "100", "--out", str(out)], capture_output=True, text=True, timeout=120)
+    run = run_cli("track", f"{folder}/dwell_01_2.00Hz/*.tif", "--fps", "100", "--out", str(out))
     assert run.returncode == 2 and not out.exists()
     line = run.stderr.strip()
     assert "\n" not in line and "monochrome" in line and "bright@x,y" in line and "brightness = " in line

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import cv2
 import numpy as np
@@ -26,6 +24,9 @@ from servoscope.simulate import simulate_campaign
 from servoscope.simulate.campaign import reference_stickers
 from servoscope.simulate.render import FrameRenderer, picture_motion
 from servoscope.simulate.scene import Scene, colour_rgb
+
+# run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).
+from support import run_cli
 
 ROLL = math.radians(0.5)
 SMALL = dict(width=480, height=384, codec="raw")
@@ -92,9 +93,8 @@ def test_reference_line_takes_the_roll_off_the_angle(dwell, motion):
 
 def test_a_moving_axis_is_warned_where_no_reference_takes_it_off(dwell, tmp_path):
     def warnings(folder, *extra):
-        run = subprocess.run([sys.executable, "-m", "servoscope", "track", str(folder / "dwell_01_2.00Hz.avi"),
-                              "--calibration", str(folder / "camera.json"), "--out", str(tmp_path / "t.csv"), *extra],
-                             capture_output=True, text=True, timeout=120)
+        run = run_cli("track", str(folder / "dwell_01_2.00Hz.avi"),
+                      "--calibration", str(folder / "camera.json"), "--out", str(tmp_path / "t.csv"), *extra)
         assert run.returncode == 0, run.stderr
         return run.stderr
 
@@ -151,7 +151,6 @@ def test_bad_reference_markers_are_one_clear_error(dwell, tmp_path):
         with pytest.raises(ServoscopeError, match=expected):
             load_campaign(manifest, check_videos=False)
     out = tmp_path / "t.csv"
-    run = subprocess.run([sys.executable, "-m", "servoscope", "track", str(folder / "dwell_01_2.00Hz.avi"),
-                          "--reference", "#e377c2", "--out", str(out)], capture_output=True, text=True, timeout=120)
+    run = run_cli("track", str(folder / "dwell_01_2.00Hz.avi"), "--reference", "#e377c2", "--out", str(out))
     assert run.returncode == 2 and run.stderr.startswith("servoscope: error: --reference") and not out.exists()
     assert len(run.stderr.strip().splitlines()) == 1

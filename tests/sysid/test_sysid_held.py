@@ -90,16 +90,14 @@ def test_bad_holds_are_one_clear_error(fix, bounds, expected):
 
 
 def test_campaign_manifest_and_command_line_hold_parameters(quick_campaign, tmp_path):
-    import subprocess
-    import sys
+    from support import run_cli  # the command's entry point in this process, as a child ran it
 
     text = quick_campaign.read_text() + "\n[model]\nfix = {damping_ratio = 0.65}\n"
     manifest = quick_campaign.parent / "held.toml"
     manifest.write_text(text)
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(manifest), "--out", str(out),
-                          "--workers", "1", "--quiet", "--bound", "natural_frequency_rad_s=20:80"],
-                         capture_output=True, text=True, timeout=600)
+    run = run_cli("identify", str(manifest), "--out", str(out),
+                  "--workers", "1", "--quiet", "--bound", "natural_frequency_rad_s=20:80")
     assert run.returncode == 0, run.stderr
     result = json.loads((out / "result.json").read_text())
     assert result["model"]["params"]["damping_ratio"] == 0.65 and result["model"]["stderr"]["damping_ratio"] == 0
@@ -107,8 +105,7 @@ def test_campaign_manifest_and_command_line_hold_parameters(quick_campaign, tmp_
                                        "natural_frequency_rad_s": {"bounds": [20.0, 80.0]}}
     assert "(held fixed)" in (out / "report.html").read_text()
     # A name the model does not have: one line, exit 2, before anything is tracked or written.
-    bad = subprocess.run([sys.executable, "-m", "servoscope", "identify", str(manifest), "--out", str(tmp_path / "o2"),
-                          "--fix", "zeta=0.8"], capture_output=True, text=True, timeout=120)
+    bad = run_cli("identify", str(manifest), "--out", str(tmp_path / "o2"), "--fix", "zeta=0.8")
     assert bad.returncode == 2 and "'zeta' is not a parameter" in bad.stderr and not (tmp_path / "o2").exists()
     assert len(bad.stderr.strip().splitlines()) == 1
     assert math.isfinite(result["model"]["params"]["gain"])

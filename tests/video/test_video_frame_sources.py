@@ -8,8 +8,6 @@ come from the headers and from the reference readers (pyMRAW, pims).
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -28,13 +26,10 @@ pims = pytest.importorskip("pims")
 tifffile = pytest.importorskip("tifffile")
 
 from support import DATA as _DATA
+# run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).
+from support import run_cli
 
 DATA = _DATA / "highspeed"
-
-
-def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "servoscope", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=120)
 
 
 # --- real Photron and Phantom files ------------------------------------------------------------
