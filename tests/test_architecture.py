@@ -213,3 +213,50 @@ def test_long_functions_say_why():
                    if (found := _long_functions_without_a_reason(p.read_text(encoding="utf-8")))}
     assert not unexplained, (f"functions over {MAX_FUNCTION_LINES} lines of code without 'Long because …' in their "
                              f"docstring (split them, or say why not): {unexplained}")
+
+
+# Defaults with one home (servoscope/defaults.py, issue 30): the timestamp choices are spelled out
+# nowhere else, and no function, command-line option or file reader gives the settling time or a
+# dwell's shortest input a number of its own (they disagreed: 0.5, 1.0 and 0.0 against 3.0).
+_TIMESTAMP_WORDS = {"middle", "start", "end"}
+_ONE_HOME = {"settle_s", "min_seconds", "--settle", "--min-seconds"}
+
+
+def _defaults_spelled_out(source: str) -> list[str]:
+    """Where `source` spells out a default that lives in servoscope.defaults."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if (isinstance(node, (ast.Tuple, ast.List, ast.Set)) and node.elts
+                and all(isinstance(e, ast.Constant) and isinstance(e.value, str) for e in node.elts)
+                and {e.value for e in node.elts} == _TIMESTAMP_WORDS):
+            found.append(f"line {node.lineno}: the timestamp choices (defaults.TIMESTAMPS)")
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = node.args
+            positional = a.posonlyargs + a.args
+            pairs = list(zip(positional[len(positional) - len(a.defaults):], a.defaults))
+            pairs += [(arg, d) for arg, d in zip(a.kwonlyargs, a.kw_defaults) if d is not None]
+            found += [f"line {node.lineno}: {node.name}({arg.arg}={d.value!r})" for arg, d in pairs
+                      if arg.arg in _ONE_HOME and isinstance(d, ast.Constant)]
+        if isinstance(node, ast.Call) and any(isinstance(x, ast.Constant) and x.value in _ONE_HOME for x in node.args):
+            # .get("settle_s", 0.5), @click.option("--settle", "settle_s", default=1.0)
+            values = [x for x in node.args[1:] if not (isinstance(x, ast.Constant) and isinstance(x.value, str))]
+            values += [k.value for k in node.keywords if k.arg == "default"]
+            found += [f"line {node.lineno}: default {v.value!r}" for v in values
+                      if isinstance(v, ast.Constant) and isinstance(v.value, (int, float))]
+    return found
+
+
+def test_the_defaults_checker_sees_them():
+    assert _defaults_spelled_out('T = ("start", "middle", "end")\nx = ["middle", "start"]\n') == [
+        "line 1: the timestamp choices (defaults.TIMESTAMPS)"]
+    assert _defaults_spelled_out("def f(a, settle_s=1.0, *, min_seconds=3.0): pass\n") == [
+        "line 1: f(settle_s=1.0)", "line 1: f(min_seconds=3.0)"]
+    assert _defaults_spelled_out('s = d.get("settle_s", 0.5)\n@option("--settle", "settle_s", default=1.0)\ndef g(): pass\n') == [
+        "line 1: default 0.5", "line 2: default 1.0"]
+    assert _defaults_spelled_out('s = d.get("settle_s", SETTLE_S)\ndef f(settle_s=SETTLE_S): pass\n') == []
+
+
+def test_defaults_have_one_home():
+    spelled = {m: found for m, p in _modules().items()
+               if m != "servoscope.defaults" and (found := _defaults_spelled_out(p.read_text(encoding="utf-8")))}
+    assert not spelled, f"defaults spelled out outside servoscope/defaults.py (use its names): {spelled}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -88,5 +89,14 @@ def test_a_result_summary_round_trips_through_json():
 
 
 def test_import_pandas_gives_pandas():
-    pd = pytest.importorskip("pandas")
+    import pandas as pd  # a test dependency (pyproject's test extra)
+
     assert import_pandas() is pd
+
+
+def test_to_pandas_without_pandas_says_how_to_install_it(monkeypatch):
+    t = np.arange(0.0, 2.0, 1 / 240)
+    fit = fit_sine(t, np.sin(2 * math.pi * 3.0 * t), 3.0)
+    monkeypatch.setitem(sys.modules, "pandas", None)  # `import pandas` raises ImportError
+    with pytest.raises(ImportError, match="pip install pandas"):
+        fit.to_pandas()

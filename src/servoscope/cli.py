@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from .defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+from .defaults import LEAD_COLOUR, LED_COLOUR, TIMESTAMP, TIMESTAMPS, TRAIL_COLOUR
 from .errors import ServoscopeError
 
 __all__ = ["main", "cli"]
@@ -126,8 +126,8 @@ def cli() -> None:
               help="Leave exposure_s out of campaign.toml (a user who does not know the shutter).")
 @click.option("--motion-blur", flag_value=True, default=None,
               help="Render the exposure's real motion blur (global shutter only).")
-@click.option("--timestamp-at", type=click.Choice(["middle", "start", "end"]),
-              help="Which instant of the exposure a frame's timestamp marks (preset's: middle).")
+@click.option("--timestamp-at", type=click.Choice(TIMESTAMPS),
+              help=f"Which instant of the exposure a frame's timestamp marks (preset's: {TIMESTAMP}).")
 @click.option("--sticker-shape", type=click.Choice(["disc", "square", "strip"]), help="Sticker shape (preset's: disc).")
 @click.option("--sticker-aspect", type=click.FloatRange(min=0.0, min_open=True),
               help="Sticker length along the chord / width (preset's: 1; a strip's: 4).")
@@ -213,7 +213,7 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
                    "(t0 is then only dated to within the frames' gap).")
 @click.option("--readout", "readout_s", type=float, default=0.0, show_default=True,
               help="Rolling-shutter readout time in seconds (top to bottom row); 0 = global shutter.")
-@click.option("--timestamp", type=click.Choice(["middle", "start", "end"]), default="middle", show_default=True,
+@click.option("--timestamp", type=click.Choice(TIMESTAMPS), default=TIMESTAMP, show_default=True,
               help="Which point of its exposure a frame's timestamp marks.")
 @click.option("--out", "out_csv", type=click.Path(dir_okay=False, path_type=Path), help="Track CSV to write [default: VIDEO.track.csv].")
 @click.option("--deinterlace", type=click.Choice(["none", "fields", "fields-bff"]), default="none", show_default=True,

@@ -41,6 +41,36 @@ MARKER_HUE_GATE = 7.0
 #: valid frames, a step test 10 (campaign/runner.py, sysid/_sine_window.py); the larger is taken.
 MIN_VALID_FRAMES = 10
 
+# -- camera: what a frame's timestamp marks ------------------------------------------------------
+#: Which instant of its exposure a frame's timestamp marks: campaign.toml's ``[camera] timestamp``,
+#: ``TrackerSettings.timestamp``, ``servoscope track --timestamp`` and the twin's ``timestamp_at``.
+#: The first is the default ("middle", as the twin and most containers' players assume).
+TIMESTAMPS = ("middle", "start", "end")
+TIMESTAMP = TIMESTAMPS[0]
+
+# -- sweeps: dwell lengths and the steady state --------------------------------------------------
+#: The word that asks the sine fit to find where each dwell's transient ends (sysid/sine.py's
+#: ``fit_sine(settle_s="auto")``: a reference sine fitted to the record's second half, the window
+#: starting where the residual falls to :data:`TRANSIENT_SIGMAS` of its noise). ``fit_sine``'s own
+#: default, for a record handed to it alone; campaign.toml may ask for it (``[analysis] settle_s =
+#: "auto"``).
+SETTLE_AUTO = "auto"
+#: Time skipped after the input starts before a sine dwell's steady state, s: campaign.toml's
+#: ``[analysis] settle_s`` when it says none, ``servoscope plan --settle`` (a plan's dwells last
+#: this plus their periods, and the plan writes it as ``[analysis] settle_s``), and a plan read
+#: back without one. A number, not "auto", because a plan needs a length for each dwell, and a
+#: fixed window is what identify has always used (the fit still warns when a transient outlasts
+#: it: ``consider settle_s='auto'``). On the twin's quick campaign "auto" starts the dwells'
+#: windows 0.31-0.5 s after t0 and the model agrees with 0.5 s's within 0.05 %.
+SETTLE_S = 0.5
+#: ``settle_s="auto"``: the transient lasts while the RMS residual over 8 samples exceeds this many
+#: noise sigmas of the record's second half (8 samples keep the test's false-alarm rate below 1e-8
+#: a window); a numeric settle_s earns a warning when it ends before that.
+TRANSIENT_SIGMAS = 3.0
+#: Shortest input of a planned dwell, s (``servoscope plan --min-seconds``; a plan read back
+#: without ``[plan] min_seconds`` takes it too).
+MIN_DWELL_S = 3.0
+
 # -- sysid: when a dwell or a fit earns a warning ------------------------------------------------
 #: Sinusoidal fidelity (share of the output's AC power in the fitted sine) below this flags a
 #: dwell "low_fidelity" (fit_sine) and earns the transfer-function fit a warning.

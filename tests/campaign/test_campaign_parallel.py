@@ -64,6 +64,18 @@ def test_bad_worker_options_are_refused(quick_campaign):
         track_campaign(campaign, workers=2, scheduler="tcp://127.0.0.1:1")
 
 
+def test_a_retired_backend_is_refused_before_a_cluster_starts(tmp_path, monkeypatch):
+    from servoscope.markers.tracker import TrackerSettings
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started for settings no worker can track with")
+
+    monkeypatch.setattr(parallel, "start_local_cluster", no_cluster)
+    tests = [TestSpec(tmp_path / f"{n}.mp4", "sine", 0.1, 1.0, None, n) for n in ("a", "b")]
+    with pytest.raises(ServoscopeError, match='backend: \'cuda\'.*backend="auto"'):
+        parallel.track_many(tests, TrackerSettings(backend="cuda"), workers=2, keep_going=True)
+
+
 def test_unreachable_scheduler_is_a_clear_error(quick_campaign, monkeypatch):
     monkeypatch.setattr(parallel, "CONNECT_TIMEOUT_S", 1.0)
     with socket.socket() as s:  # a port nobody listens on

@@ -78,3 +78,30 @@ def test_not_a_video(folder):
 def test_missing_manifest(tmp_path):
     with pytest.raises(ServoscopeError, match="manifest not found"):
         load_campaign(tmp_path / "nothing.toml")
+
+
+def test_settle_s_defaults_to_the_one_default_and_may_be_auto(folder):
+    from servoscope.defaults import SETTLE_S, TIMESTAMP
+
+    c = load_campaign(_write(folder, GOOD))
+    assert c.settle_s == SETTLE_S and c.timestamp == TIMESTAMP
+    assert load_campaign(_write(folder, GOOD + "[analysis]\nsettle_s = 0\n")).settle_s == 0.0
+    assert load_campaign(_write(folder, GOOD + '[analysis]\nsettle_s = "auto"\n')).settle_s == "auto"
+
+
+@pytest.mark.parametrize("value, expected", [
+    ('"soon"', "analysis.settle_s: must be a number of seconds ≥ 0 or \"auto\", got 'soon'"),
+    ('"Auto"', "analysis.settle_s: must be a number of seconds ≥ 0 or \"auto\""),
+    ("-0.5", "analysis.settle_s: must be ≥ 0"),
+    ("true", "analysis.settle_s: must be a finite number"),
+])
+def test_bad_settle_s_is_refused(folder, value, expected):
+    with pytest.raises(ServoscopeError, match=re.escape(expected)):
+        load_campaign(_write(folder, GOOD + f"[analysis]\nsettle_s = {value}\n"))
+
+
+def test_a_bad_timestamp_names_the_choices(folder):
+    with pytest.raises(ServoscopeError, match=re.escape(
+            'camera.timestamp: \'centre\': which point of its exposure a frame\'s time marks, one of '
+            '"middle" (the default), "start", "end"')):
+        load_campaign(_write(folder, '[camera]\ntimestamp = "centre"\n' + GOOD))

@@ -74,7 +74,7 @@ def test_rgb_reference_agrees_with_the_yuv_engine(tracks):
         assert gap.max() < 1.2
 
 
-def test_cuda_backend_is_refused_naming_the_cpu(clip):
+def test_cuda_backend_is_refused_naming_auto(clip):
     path, _ = clip
-    with pytest.raises(ServoscopeError, match="backend=\"cpu\""):
+    with pytest.raises(ServoscopeError, match="backend=\"auto\""):
         track_video(path, TrackerSettings(led=None, backend="cuda"))

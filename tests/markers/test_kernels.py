@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -156,3 +158,23 @@ def test_bad_engine_names():
         resolve_engine(TrackerSettings(engine="opencl"))
     with pytest.raises(ServoscopeError, match="backend"):
         resolve_engine(TrackerSettings(backend="tpu"))
+
+
+def test_cpu_backend_is_a_deprecated_alias_of_auto():
+    """backend="cpu" did what "auto" does: it warns and reads as "auto" (the same track and cache key)."""
+    from servoscope.campaign.cache import settings_fingerprint
+    from servoscope.errors import ServoscopeError
+    from servoscope.markers.tracker import BACKENDS, resolve_engine
+
+    assert BACKENDS == ("auto",)
+    with pytest.warns(DeprecationWarning, match='backend="auto"'):
+        old = TrackerSettings(backend="cpu")
+    assert old.backend == "auto" and old == TrackerSettings()
+    assert resolve_engine(old) == "numba"
+    assert settings_fingerprint(old) == settings_fingerprint(TrackerSettings())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        TrackerSettings()  # "auto" itself warns nothing
+        cuda = TrackerSettings(backend="cuda")  # refused when used, not when made
+    with pytest.raises(ServoscopeError, match='backend: \'cuda\'.*backend="auto"'):
+        resolve_engine(cuda)

@@ -172,3 +172,38 @@ def test_plan_command_bad_input_is_a_servoscope_error(tmp_path):
     result = runner.invoke(plan_command, ["--fps", "100", "--from", "1", "--to", "5", "--lead", "notacolour",
                                           "--out", str(tmp_path / "p.toml")])
     assert isinstance(result.exception, ServoscopeError) and "--lead" in str(result.exception)
+
+
+def test_one_settle_and_min_seconds_default_made_written_and_read_back(tmp_path):
+    """A plan's settle_s and min_seconds default as identify and the command line do, and read back as written."""
+    from servoscope.defaults import MIN_DWELL_S, SETTLE_S
+
+    plan = plan_sweep(100, 1, 10, points=3)
+    assert plan.settle_s == SETTLE_S and plan.min_seconds == MIN_DWELL_S
+    for minimum in (0.0, 1.25, 7.0):
+        plan = plan_sweep(100, 1, 10, points=3, min_seconds=minimum)
+        assert read_plan(write_plan(plan, tmp_path / "p.toml")).min_seconds == minimum
+    # A hand-made [plan] without the two: the defaults, not 0 (which would plan shorter dwells than asked).
+    text = plan_to_toml(plan_sweep(100, 1, 10, points=3))
+    lean = tmp_path / "lean.toml"
+    lean.write_text(text.replace("min_seconds = 3.0\n", "").replace("settle_s = 0.5\n", ""))
+    back = read_plan(lean)
+    assert back.min_seconds == MIN_DWELL_S and back.settle_s == SETTLE_S
+    # The command line's help shows the same defaults.
+    help_text = CliRunner().invoke(plan_command, ["--help"], terminal_width=200).output
+    assert f"[default: {MIN_DWELL_S}]" in help_text and f"[default: {SETTLE_S}]" in help_text
+
+
+def test_an_auto_analysis_settle_is_kept_and_the_dwells_timed_with_seconds(tmp_path):
+    from servoscope.defaults import SETTLE_S
+
+    text = plan_to_toml(plan_sweep(100, 1, 10, points=3, settle_s=0.75))
+    assert '[analysis]\nsettle_s = 0.75\n' in text
+    auto = tmp_path / "auto.toml"
+    auto.write_text(text.replace("[analysis]\nsettle_s = 0.75\n", '[analysis]\nsettle_s = "auto"\n'))
+    back = read_plan(auto)
+    assert back.settle_auto and back.settle_s == 0.75  # [plan] settle_s still times the dwells
+    assert '[analysis]\nsettle_s = "auto"\n' in plan_to_toml(back)
+    # No [plan] settle_s: an "auto" analysis leaves the plan the default seconds.
+    auto.write_text(auto.read_text().replace("settle_s = 0.75\n", ""))
+    assert read_plan(auto).settle_s == SETTLE_S

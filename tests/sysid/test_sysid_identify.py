@@ -460,3 +460,26 @@ def test_three_precise_phases_give_the_dead_time_not_an_alias():
     # Its cost is the fit at the true delay's or lower (the global optimum, not a neighbour of it).
     held = fit_transfer_function(fr, order=(0, 2), mode="complex", fix={"dead_time_s": 0.085})
     assert r.cost <= held.cost
+
+
+def test_settle_auto_in_the_manifest_is_fit_sines_auto(quick_result):
+    """campaign.toml's ``settle_s = "auto"``: each dwell's window where fit_sine's own "auto" puts it."""
+    from dataclasses import replace
+
+    from servoscope.campaign import identify
+    from servoscope.campaign.result import input_start
+
+    campaign = replace(quick_result.campaign, settle_s="auto")
+    result = identify(campaign, tracks=quick_result.tracks)
+    assert set(result.sine_fits) == set(quick_result.sine_fits)
+    for test in campaign.sine_tests:
+        track = quick_result.tracks[test.label]
+        own = fit_sine(track.angle_time_s, track.angle_rad, test.frequency_hz, t0_s=input_start(test, track),
+                       valid=track.valid)
+        got = result.sine_fits[test.label]
+        assert got.settle_s == own.settle_s and got.n_samples == own.n_samples
+        assert got.amplitude == pytest.approx(own.amplitude, rel=1e-9)
+        assert quick_result.sine_fits[test.label].settle_s == pytest.approx(quick_result.campaign.settle_s)
+    # The fixed 0.5 s and the dwells' own windows (0.31-0.5 s here) give the same model.
+    for name, value in quick_result.model.params.items():
+        assert result.model.params[name] == pytest.approx(value, rel=2e-3)

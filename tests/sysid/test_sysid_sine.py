@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 
@@ -197,16 +196,19 @@ def test_summary_is_json_serializable():
     assert isinstance(s["n_samples"], int) and isinstance(s["warnings"], list)
 
 
-def test_to_pandas_or_clear_import_error():
+def test_to_pandas_is_the_window_with_its_fit():
+    import pandas as pd  # a test dependency (the test extra): the real branch, not the ImportError one
+
     t = frames()
     r = fit_sine(t, sine(t, 0.05, 2.0, 0.1), 2.0, t0_s=T0)
-    if importlib.util.find_spec("pandas") is None:
-        with pytest.raises(ImportError, match="pandas"):
-            r.to_pandas()
-    else:
-        df = r.to_pandas()
-        assert list(df.columns) == ["time_s", "y", "fitted", "residual"]
-        assert len(df) == r.n_samples
+    df = r.to_pandas()
+    assert isinstance(df, pd.DataFrame)
+    assert list(df.columns) == ["time_s", "y", "fitted", "residual"]
+    assert len(df) == r.n_samples
+    np.testing.assert_array_equal(df["time_s"].to_numpy(), r.time_s)
+    np.testing.assert_array_equal(df["y"].to_numpy(), r.y)
+    np.testing.assert_allclose(df["fitted"].to_numpy(), r.model(r.time_s))
+    np.testing.assert_allclose(df["y"] - df["fitted"], df["residual"], atol=1e-12)
 
 
 def test_auto_refinement_keeps_commanded_frequency_on_short_windows():

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..camera.model import CameraModel
 from ..camera.plane import Plane
+from ..defaults import SETTLE_AUTO, SETTLE_S, TIMESTAMP, TIMESTAMPS
 from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
 from ..markers.selection import check_near
@@ -80,8 +81,11 @@ class Campaign:
     camera : CameraModel or None
     exposure_s : float or None
     input_units : str
-    settle_s : float
-        Time skipped after the input starts before a dwell's steady state (s).
+    settle_s : float or "auto"
+        Time skipped after the input starts before a dwell's steady state (s;
+        :data:`~servoscope.defaults.SETTLE_S` when the manifest says none), or
+        ``"auto"``: each dwell's own, where its transient ends (see
+        :func:`servoscope.sysid.fit_sine`).
     tests : tuple of TestSpec
     skipped : tuple of (label, reason)
         Tests left out because their video could not be read (``keep_going``).
@@ -89,7 +93,7 @@ class Campaign:
         Rolling-shutter readout time (s); 0 for a global shutter.
     timestamp : {"middle", "start", "end"}
         Which point of its exposure a frame's timestamp marks (``[camera]
-        timestamp``; "middle" by default).
+        timestamp``; "middle" by default: :data:`~servoscope.defaults.TIMESTAMPS`).
     lead_near, trail_near : (float, float) or None
         A marker pinned by position (px, first frame), from
         ``lead = {colour = "#…", near = [x, y]}``; None when not pinned.
@@ -121,14 +125,14 @@ class Campaign:
     camera: CameraModel | None
     exposure_s: float | None
     input_units: str
-    settle_s: float
+    settle_s: float | str
     tests: tuple[TestSpec, ...] = field(default_factory=tuple)
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
     readout_s: float = 0.0
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
     led_near: tuple[float, float] | None = None
-    timestamp: str = "middle"
+    timestamp: str = TIMESTAMP
     reference: tuple[str, str] | None = None
     extra: tuple[str, ...] = ()
     model_fix: dict[str, float] = field(default_factory=dict)
@@ -290,11 +294,11 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     exposure = None
     if "exposure_s" in camera_t:
         exposure = problems.number("camera.exposure_s", camera_t["exposure_s"], positive=True)
-    timestamp = camera_t.get("timestamp", "middle")
-    if timestamp not in ("start", "middle", "end"):
-        problems.add("camera.timestamp", f"{timestamp!r}: which point of its exposure a frame's time marks, "
-                     "one of \"start\", \"middle\" (the default), \"end\"")
-        timestamp = "middle"
+    timestamp = camera_t.get("timestamp", TIMESTAMP)
+    if timestamp not in TIMESTAMPS:
+        problems.add("camera.timestamp", f"{timestamp!r}: which point of its exposure a frame's time marks, one of "
+                     + ", ".join(f'"{t}"' + (" (the default)" if t == TIMESTAMP else "") for t in TIMESTAMPS))
+        timestamp = TIMESTAMP
     readout = 0.0
     if "readout_s" in camera_t:
         # A rolling shutter's row-to-row delay over the frame (0: global shutter).
@@ -408,7 +412,13 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
 
     analysis_t = problems.table(data, "analysis")
     problems.unknown("analysis", analysis_t.keys(), _ANALYSIS_KEYS)
-    settle = problems.number("analysis.settle_s", analysis_t.get("settle_s", 0.5), nonnegative=True)
+    settle = analysis_t.get("settle_s", SETTLE_S)
+    if settle != SETTLE_AUTO:
+        # A number of seconds, or "auto": each dwell's own, where its transient ends (fit_sine).
+        if isinstance(settle, str):
+            problems.add("analysis.settle_s", f"must be a number of seconds ≥ 0 or \"{SETTLE_AUTO}\", got {settle!r}")
+        else:
+            settle = problems.number("analysis.settle_s", settle, nonnegative=True)
 
     raw_tests = data.get("tests")
     tests: list[TestSpec] = []
@@ -538,7 +548,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
         camera=camera,
         exposure_s=exposure,
         input_units=units,
-        settle_s=float(settle),
+        settle_s=settle if settle == SETTLE_AUTO else float(settle),
         tests=tuple(tests),
         skipped=tuple(skipped),
         readout_s=float(readout or 0.0),

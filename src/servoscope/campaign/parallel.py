@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Protocol, Sequence
 
 from ..errors import ServoscopeError
-from ..markers.tracker import Track, TrackerSettings, track_video
+from ..markers.tracker import Track, TrackerSettings, resolve_engine, track_video
 from ..video.reader import THREADS_ENV
 from .cache import TrackCache
 
@@ -195,7 +195,10 @@ def _track_on_dask(pending, settings, n_workers: int | None, scheduler: str | No
     except ImportError:  # pragma: no cover - older distributed
         from distributed.scheduler import KilledWorker
 
-    with _client(n_workers, scheduler, settings.backend) as client:
+    # Settings no engine takes (a retired backend, an unknown engine) are refused here, once,
+    # not by every worker after a cluster has started.
+    resolve_engine(settings)
+    with _client(n_workers, scheduler) as client:
         # Longest first (file size as a proxy for frames): fewer workers
         # idle while the last long video finishes.
         order = sorted(pending, key=lambda p: -_size(p[1].video))
@@ -296,7 +299,7 @@ def start_local_cluster(n_workers: int | None, threads_per_worker_video: int, *,
 
 
 @contextmanager
-def _client(n_workers: int | None, scheduler: str | None, settings_backend: str = "auto") -> Iterator:
+def _client(n_workers: int | None, scheduler: str | None) -> Iterator:
     """A Dask client on a fresh local cluster or on ``scheduler``; closed on exit."""
     from distributed import Client
 
@@ -317,7 +320,7 @@ def _client(n_workers: int | None, scheduler: str | None, settings_backend: str 
             # per worker (more would fight over the same cores). The tracks are
             # the same bytes whatever the thread count (tested).
             share = max(1, default_workers() // max(1, n_workers or 1))
-            cluster = start_local_cluster(n_workers, share, fork=settings_backend != "cuda", silence_logs=quiet)
+            cluster = start_local_cluster(n_workers, share, silence_logs=quiet)
             client = Client(cluster)
         else:
             try:

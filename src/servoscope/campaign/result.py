@@ -120,7 +120,10 @@ class IdentificationResult:
     sine_fits : dict of label → SineFit
     frequency_response : FrequencyResponse
     model : TransferFunctionFit
-        The fitted 2nd-order model (magnitude fit, the paper's eq. 6).
+        The fitted model: the order asked ((0, 2) by default, the paper's eq. 6), fitted to
+        magnitude and phase with a dead time when every dwell's phase is known ("complex",
+        what ``fit="auto"`` picks then), else to the magnitudes alone ("magnitude", as the
+        paper does).
     step : StepAnalysis or None
         The step test, with the dead time fitted against the model.
     step_label : str or None

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..angle.pivot import axis_moved
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
+from ..defaults import STEP_DISCERNIBLE_SIGMA
 from ..errors import ServoscopeError
 from ..markers.tracker import Track, TrackerSettings
 from ..sysid import (
@@ -423,8 +424,10 @@ def identify(
         fits[test.label] = sine_fit
         amplitudes.append(test.amplitude)
     if len(fits) < 3:
+        asked = "its order chosen from the data" if order == "auto" else f"order (nb, na) = {order}"
         raise ServoscopeError(
-            f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; a 2nd-order model needs at least 3"
+            f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; identify fits a model ({asked}) "
+            "to 3 or more, whatever its order"
         )
     fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
     if campaign.exposure_s is not None:
@@ -517,7 +520,7 @@ def identify(
                     # Metrics of a step that never moved would be NaN or noise.
                     warnings.append(
                         f"{test.label}: step test left out: the output never moves "
-                        "(change within 10 noise sigma of the baseline)"
+                        f"(change within {STEP_DISCERNIBLE_SIGMA:g} noise sigma of the baseline)"
                     )
                     step = None
                 else:

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..defaults import TIMESTAMPS
+
 __all__ = [
     "SwitchTime",
     "TIMESTAMP_CONVENTIONS",
@@ -37,8 +39,9 @@ __all__ = [
     "led_switch_time",
 ]
 
-#: Where in its exposure a frame's timestamp lies, as a fraction of the exposure from its start.
-TIMESTAMP_CONVENTIONS = {"start": 0.0, "middle": 0.5, "end": 1.0}
+#: Where in its exposure a frame's timestamp lies, as a fraction of the exposure from its start:
+#: what each of the choices (:data:`servoscope.defaults.TIMESTAMPS`, their one list) means.
+TIMESTAMP_CONVENTIONS = {"middle": 0.5, "start": 0.0, "end": 1.0}
 
 #: Bounds of the LED level's noise (in units of its lit − off step) used to tell a partly lit
 #: frame from a lit or dark one: at least 0.3 % (8-bit luma of a 100 DN step quantizes to 1 %
@@ -94,15 +97,15 @@ def exposure_middle_offset_s(timestamp: str, exposure_s: float | None) -> float:
 
     Parameters
     ----------
-    timestamp : {"start", "middle", "end"}
+    timestamp : {"middle", "start", "end"}
         Which point of the exposure the camera's frame times mark.
     exposure_s : float or None
         The exposure; None (unknown) gives 0: the offset is common to the
         LED and the markers, so phases and the dead time do not depend on
         it, only the absolute times do.
     """
-    if timestamp not in TIMESTAMP_CONVENTIONS:
-        raise ValueError(f"timestamp {timestamp!r}: use one of {', '.join(TIMESTAMP_CONVENTIONS)}")
+    if timestamp not in TIMESTAMPS:
+        raise ValueError(f"timestamp {timestamp!r}: use one of {', '.join(TIMESTAMPS)}")
     if exposure_s is None:
         return 0.0
     return (0.5 - TIMESTAMP_CONVENTIONS[timestamp]) * float(exposure_s)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 from ..camera.model import CameraModel
 from ..camera.plane import Plane
-from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+from ..defaults import LEAD_COLOUR, LED_COLOUR, TIMESTAMP, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from .colour import BRIGHTNESS, parse_colour
 
@@ -72,10 +73,13 @@ class TrackerSettings:
         native samples (memory-mapped MRAW and CINE, TIFF sequences; no 8-bit
         rounding), see :mod:`servoscope.markers.mono_engine`; ``"reference-rgb"``
         is its oracle.
-    backend : {"auto", "cpu"}
-        Where the kernel runs: this machine's CPU. ``"cuda"`` is refused with
-        an error: no tracking engine runs on a GPU yet (the GPU pass of
-        :mod:`servoscope.markers.gpu` is a whole-frame batch classifier,
+    backend : {"auto"}
+        Where the kernel runs: ``"auto"``, the only choice, is this machine's
+        CPU (kept for compatibility; the command line does not offer it).
+        ``"cpu"``, which did the same, is a deprecated alias: it warns
+        (:class:`DeprecationWarning`) and reads as ``"auto"``. ``"cuda"`` is
+        refused with an error: no tracking engine runs on a GPU (the GPU pass
+        of :mod:`servoscope.markers.gpu` is a whole-frame batch classifier,
         measured by ``servoscope bench``), and a track must not claim a GPU
         it did not use.
     lead_near, trail_near : (float, float) or None
@@ -136,7 +140,7 @@ class TrackerSettings:
     engine: str = "auto"
     backend: str = "auto"
     readout_s: float = 0.0
-    timestamp: str = "middle"
+    timestamp: str = TIMESTAMP
     lead_near: tuple[float, float] | None = None
     trail_near: tuple[float, float] | None = None
     led_near: tuple[float, float] | None = None
@@ -144,13 +148,22 @@ class TrackerSettings:
     extra: tuple[str, ...] = ()
     plane: Plane | None = None
 
+    def __post_init__(self) -> None:
+        if self.backend in DEPRECATED_BACKENDS:
+            warnings.warn(f"TrackerSettings(backend={self.backend!r}) is deprecated: {DEPRECATED_BACKENDS[self.backend]}",
+                          DeprecationWarning, stacklevel=3)
+            # Read as "auto": the same track, and the same cache key.
+            object.__setattr__(self, "backend", "auto")
+
 
 ENGINES = ("auto", "numba", "numpy", "mono", "reference-rgb")
-BACKENDS = ("auto", "cpu")
+BACKENDS = ("auto",)
+#: Backends that did what "auto" does: accepted with a DeprecationWarning, read as "auto".
+DEPRECATED_BACKENDS = {"cpu": "it is what \"auto\" does (tracking runs on this machine's CPU); use backend=\"auto\""}
 #: Backends once offered, refused with what to use instead.
 RETIRED_BACKENDS = {"cuda": "no tracking engine runs on a GPU: the GPU pass (servoscope.markers.gpu, measured by "
                             "`servoscope bench`) classifies whole frames in batches and is not a tracker; "
-                            "use backend=\"cpu\" (or \"auto\")"}
+                            "use backend=\"auto\" (the CPU)"}
 
 
 def resolve_engine(settings: TrackerSettings) -> str:

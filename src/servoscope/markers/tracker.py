@@ -35,6 +35,7 @@ from ..angle.rigid import rigid_motion
 from ..camera.plane_map import centroids_in_plane, plane_camera
 from ..camera.rolling_shutter import angle_sample_times, check_readout
 from ..camera.undistort import undistort_centroids
+from ..defaults import TIMESTAMPS
 from ..errors import ServoscopeError
 from ..video.reader import VideoInfo, probe_video, thread_budget
 from .colour import AUTO, BRIGHTNESS, ColourModel, parse_colour
@@ -42,7 +43,7 @@ from .frame_checks import flag_nonrigid, flag_repeated
 from .frame_record import EngineInput, TrackLog
 from .led_level import input_start
 from .led_search import led_input_start
-from .led_timing import TIMESTAMP_CONVENTIONS, exposure_middle_offset_s, frame_period_s
+from .led_timing import exposure_middle_offset_s, frame_period_s
 from .marker_state import MarkerTracker
 from .mono_engine import run_mono
 from .rgb_engine import run_rgb
@@ -415,8 +416,8 @@ def _finish(path: Path, settings: TrackerSettings, info: VideoInfo, fields: str 
 
 def _check_exposure(path: Path, settings: TrackerSettings, time_s: np.ndarray) -> None:
     """Refuse an exposure no camera gives: zero or negative, or longer than the frame interval."""
-    if settings.timestamp not in TIMESTAMP_CONVENTIONS:
-        raise ServoscopeError(f"{path}: timestamp {settings.timestamp!r}: use one of {', '.join(TIMESTAMP_CONVENTIONS)}")
+    if settings.timestamp not in TIMESTAMPS:
+        raise ServoscopeError(f"{path}: timestamp {settings.timestamp!r}: use one of {', '.join(TIMESTAMPS)}")
     if settings.exposure_s is None:
         return
     period = frame_period_s(time_s)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+from ..defaults import LEAD_COLOUR, LED_COLOUR, MIN_DWELL_S, SETTLE_S, TRAIL_COLOUR
 from .protocols import PROTOCOLS
 
 __all__ = ["plan", "drive"]
@@ -28,8 +28,8 @@ __all__ = ["plan", "drive"]
               help="Amplitude as a test axis: dwells at every frequency for each amplitude (e.g. 0.05,0.1,0.2); "
                    "identify compares each frequency's gains (the linearity check).")
 @click.option("--periods", default=8.0, show_default=True, type=float, help="Periods per dwell after settling.")
-@click.option("--min-seconds", default=3.0, show_default=True, type=float, help="Shortest input duration, s.")
-@click.option("--settle", "settle_s", default=1.0, show_default=True, type=float,
+@click.option("--min-seconds", default=MIN_DWELL_S, show_default=True, type=float, help="Shortest input duration, s.")
+@click.option("--settle", "settle_s", default=SETTLE_S, show_default=True, type=float,
               help="Settling time after the input starts, s (also [analysis] settle_s).")
 @click.option("--update-hz", default=50.0, show_default=True, type=float,
               help="Command update rate: the servo's PWM rate, Hz.")

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
+from ..defaults import LEAD_COLOUR, LED_COLOUR, MIN_DWELL_S, SETTLE_AUTO, SETTLE_S, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from .._io import write_text_atomic
 
@@ -157,6 +157,10 @@ class SweepPlan:
         The manifest's ``[camera]`` table, passed through (may be empty).
     drive : dict
         After driving: the rig settings used (``[plan.drive]``).
+    settle_auto : bool
+        The manifest's ``[analysis] settle_s`` is ``"auto"`` (each dwell's steady state found
+        by the fit, :func:`servoscope.sysid.fit_sine`): kept when the plan is written again;
+        ``settle_s`` still times the dwells.
     """
 
     fps: float
@@ -172,6 +176,7 @@ class SweepPlan:
     units: str = "normalized"
     camera: dict[str, Any] = field(default_factory=dict)
     drive: dict[str, Any] = field(default_factory=dict)
+    settle_auto: bool = False
 
     @property
     def warnings(self) -> list[str]:
@@ -272,8 +277,8 @@ def plan_sweep(
     points: int = 14,
     amplitude: float = 0.1,
     periods: float = 8,
-    min_seconds: float = 3.0,
-    settle_s: float = 1.0,
+    min_seconds: float = MIN_DWELL_S,
+    settle_s: float = SETTLE_S,
     update_hz: float = 50.0,
     step: bool = True,
     step_amplitude: float = 0.5,
@@ -300,9 +305,10 @@ def plan_sweep(
     periods : float
         Periods wanted after ``settle_s`` in each dwell.
     min_seconds : float
-        Shortest input duration, s.
+        Shortest input duration, s (:data:`~servoscope.defaults.MIN_DWELL_S`).
     settle_s : float
-        Settling time after t0, s.
+        Settling time after t0, s (:data:`~servoscope.defaults.SETTLE_S`); also the
+        manifest's ``[analysis] settle_s``.
     update_hz : float
         Command update rate (the servo's PWM rate), Hz.
     step : bool
@@ -446,7 +452,7 @@ def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
         _toml_table(lines, "[camera]", plan.camera)
     _toml_table(lines, "[markers]", plan.markers)
     _toml_table(lines, "[input]", {"units": plan.units})
-    _toml_table(lines, "[analysis]", {"settle_s": float(plan.settle_s)})
+    _toml_table(lines, "[analysis]", {"settle_s": SETTLE_AUTO if plan.settle_auto else float(plan.settle_s)})
     for d in plan.dwells:
         _toml_table(lines, "[[tests]]", {
             "video": d.video, "label": d.label, "kind": d.kind,
@@ -566,15 +572,31 @@ def read_plan(path: str | Path) -> SweepPlan:
     return SweepPlan(
         fps=get("fps", positive=True, allow_zero=False),
         update_hz=get("update_hz", 50.0, positive=True, allow_zero=False),
-        settle_s=get("settle_s", data.get("analysis", {}).get("settle_s", 0.5), positive=True),
+        settle_s=get("settle_s", _analysis_settle_s(data), positive=True),
         periods=get("periods", 8.0, positive=True, allow_zero=False),
-        min_seconds=get("min_seconds", 0.0, positive=True),
+        min_seconds=get("min_seconds", MIN_DWELL_S, positive=True),
         lead_in_s=get("lead_in_s", 1.0, positive=True),
         tail_s=get("tail_s", 0.5, positive=True),
         rest_s=get("rest_s", 2.0, positive=True),
         dwells=tuple(dwells), markers=dict(markers), units=units, camera=dict(camera),
         drive=dict(drive) if isinstance(drive, dict) else {},
+        settle_auto=_analysis(data).get("settle_s") == SETTLE_AUTO,
     )
+
+
+def _analysis(data: dict) -> dict:
+    analysis = data.get("analysis", {})
+    return analysis if isinstance(analysis, dict) else {}
+
+
+def _analysis_settle_s(data: dict) -> Any:
+    """A plan's settling time when ``[plan]`` says none: ``[analysis] settle_s``, else the default.
+
+    A plan needs seconds to time its dwells: ``settle_s = "auto"`` (each dwell's own, found by
+    the fit) leaves the plan the default.
+    """
+    settle = _analysis(data).get("settle_s", SETTLE_S)
+    return SETTLE_S if settle == SETTLE_AUTO else settle
 
 
 def with_videos(plan: SweepPlan, videos: list[str]) -> SweepPlan:

@@ -25,7 +25,7 @@ from ..video.sequence_writer import MRAW_NAME, MrawWriter, TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
-from ..defaults import REFERENCE_COLOURS
+from ..defaults import REFERENCE_COLOURS, TIMESTAMP
 from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
@@ -606,7 +606,7 @@ def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fp
         # partly lit frame gives the input's start only if it is known.
         *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 and p.manifest_exposure else []),
         # Said only when the timestamp is not the exposure's middle (the default).
-        *([f"timestamp = {_toml_str(p.timestamp_at)}"] if p.timestamp_at != "middle" else []),
+        *([f"timestamp = {_toml_str(p.timestamp_at)}"] if p.timestamp_at != TIMESTAMP else []),
         # Likewise the sensor's readout time (from its data sheet or measured).
         *([f"readout_s = {_toml_float(p.readout_s)}"] if p.readout_s > 0 else []),
         "",

@@ -10,16 +10,13 @@ from fractions import Fraction
 import numpy as np
 
 from ..camera.model import CameraModel
-from ..defaults import EXTRA_COLOURS
+from ..defaults import EXTRA_COLOURS, SETTLE_S, TIMESTAMP, TIMESTAMPS
 from ..errors import ServoscopeError
 from .scene import REFERENCE_SIZE, Scene
 from .servo import ServoModel
 from .view import ObliqueView
 
-__all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "TIMESTAMP_AT", "get_preset"]
-
-#: What a frame timestamp may mark: the middle (default), start or end of its exposure.
-TIMESTAMP_AT = ("middle", "start", "end")
+__all__ = ["CampaignPreset", "PRESETS", "PAPER_SERVO", "get_preset"]
 
 #: The paper's fit: G(s) = 0.23·37² / (s² + 2·0.65·37·s + 37²), dead time 85 ms.
 PAPER_SERVO = ServoModel(num=(0.23 * 37.0**2,), den=(1.0, 2.0 * 0.65 * 37.0, 37.0**2), dead_time_s=0.085)
@@ -72,7 +69,8 @@ class CampaignPreset:
         Time with the LED lit before the input starts (t0 is this plus a
         seeded fraction of a frame, so it never falls on a frame boundary).
     settle_s : float
-        Sine dwells: time after t0 allowed for the transient.
+        Sine dwells: time after t0 allowed for the transient (by default what identify skips
+        when campaign.toml says none, :data:`servoscope.defaults.SETTLE_S`).
     min_dwell_s, min_periods : float
         Sine dwells record ``max(min_dwell_s, min_periods / f)`` after settling.
     step_after_t0_s : float
@@ -225,7 +223,7 @@ class CampaignPreset:
     exposure_s: float | None = None
     readout_s: float = 0.0
     pre_roll_s: float = 0.5
-    settle_s: float = 0.5
+    settle_s: float = SETTLE_S
     min_dwell_s: float = 3.0
     min_periods: float = 4.0
     step_after_t0_s: float = 1.5
@@ -243,7 +241,7 @@ class CampaignPreset:
     motion_blur: bool = False
     blur_step_px: float = 0.5
     blur_max_samples: int = 32
-    timestamp_at: str = "middle"
+    timestamp_at: str = TIMESTAMP
     frames_format: str | None = None
     roll_rad: float = 0.0
     roll_hz: float = 3.0
@@ -317,8 +315,8 @@ class CampaignPreset:
         if not self.blur_step_px > 0 or int(self.blur_max_samples) != self.blur_max_samples \
                 or self.blur_max_samples < 1:
             raise ServoscopeError("blur_step_px must be > 0 and blur_max_samples an integer >= 1")
-        if self.timestamp_at not in TIMESTAMP_AT:
-            raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMP_AT)}, not {self.timestamp_at!r}")
+        if self.timestamp_at not in TIMESTAMPS:
+            raise ServoscopeError(f"timestamp_at must be one of {', '.join(TIMESTAMPS)}, not {self.timestamp_at!r}")
         if self.frames_format not in (None, "tiff16", "mraw"):
             raise ServoscopeError(f"frames_format must be None, 'tiff16' or 'mraw', not {self.frames_format!r}")
         if self.frames_format == "mraw" and not (self.monochrome and self.bit_depth in (8, 12, 16)):

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from servoscope.defaults import MAX_INVALID_FRACTION, NEAR_NYQUIST
+from servoscope.defaults import MAX_INVALID_FRACTION, NEAR_NYQUIST, TRANSIENT_SIGMAS
 from servoscope.errors import ServoscopeError
 
 __all__ = ["FEW_PERIODS", "Window", "select_window", "steady_state_start", "window_checks"]
@@ -22,7 +22,6 @@ _MIN_SAMPLES = 5
 _FEW_SAMPLES = 20
 #: Fewer periods in the window earn a "few_periods" flag (and keep the commanded frequency).
 FEW_PERIODS = 2.0
-_TRANSIENT_SIGMAS = 3.0
 
 
 def steady_state_start(
@@ -77,7 +76,7 @@ def steady_state_start(
     ok = (count >= 4) & (ts < mid)
     rms = np.zeros(ts.size)
     rms[ok] = np.sqrt((csum[end_idx[ok]] - csum[idx[ok]]) / count[ok])
-    exceed = np.nonzero(ok & (rms > _TRANSIENT_SIGMAS * sigma))[0]
+    exceed = np.nonzero(ok & (rms > TRANSIENT_SIGMAS * sigma))[0]
     if exceed.size == 0:
         return t_from, False
     start = float(ts[exceed[-1]]) + width

@@ -91,7 +91,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from servoscope.defaults import DISTORTED_THD, LOW_FIDELITY
+from servoscope.defaults import DISTORTED_THD, LOW_FIDELITY, SETTLE_AUTO
 from servoscope.errors import ServoscopeError
 
 # The null channel is a property of the two markers' tracks; re-exported here, where fit_sine uses it.
@@ -113,7 +113,7 @@ def fit_sine(
     frequency_hz: float,
     *,
     t0_s: float | None = None,
-    settle_s: float | str = "auto",
+    settle_s: float | str = SETTLE_AUTO,
     valid: ArrayLike | None = None,
     refine_frequency: bool | str = "auto",
     t0_stderr_s: float | None = None,
@@ -137,6 +137,9 @@ def fit_sine(
         ``t0_s`` is None) to let the transient die out; "auto" detects the
         end of the transient from the data (module docstring). With a
         number, a transient still visible after it is warned about.
+        (``servoscope identify`` passes campaign.toml's ``[analysis]
+        settle_s``: :data:`~servoscope.defaults.SETTLE_S` unless it says a
+        number or "auto".)
     valid : array_like of bool, shape (n,), optional
         False marks frames to exclude.
     refine_frequency : {"auto", True, False}, default "auto"
@@ -282,8 +285,8 @@ def _checked_inputs(
     if not (math.isfinite(f_cmd) and f_cmd > 0):
         raise ServoscopeError(f"fit_sine: frequency_hz must be positive, got {frequency_hz!r}")
     auto_settle = isinstance(settle_s, str)
-    if auto_settle and settle_s != "auto":
-        raise ServoscopeError(f"fit_sine: settle_s must be a number >= 0 or 'auto', got {settle_s!r}")
+    if auto_settle and settle_s != SETTLE_AUTO:
+        raise ServoscopeError(f"fit_sine: settle_s must be a number >= 0 or {SETTLE_AUTO!r}, got {settle_s!r}")
     if not auto_settle and not (math.isfinite(float(settle_s)) and float(settle_s) >= 0):
         raise ServoscopeError(f"fit_sine: settle_s must be >= 0, got {settle_s!r}")
     if t0_s is not None and not math.isfinite(float(t0_s)):

@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
 
+from servoscope.defaults import STEP_DISCERNIBLE_SIGMA
 from servoscope.errors import ServoscopeError
 from servoscope.results import readonly
 from servoscope.sysid.step_result import StepAnalysis, step_discernible
@@ -265,7 +266,7 @@ def _response_metrics(
     nan = float("nan")
     rise = overshoot = peak_time = settling = dead_thr = nan
     if not step_discernible(change, sigma):
-        warns.append("no discernible step response (change within 10 noise sigma)")
+        warns.append(f"no discernible step response (change within {STEP_DISCERNIBLE_SIGMA:g} noise sigma)")
         return rise, overshoot, peak_time, settling, dead_thr
     r = (yp - initial) / change
     rs = _moving_average3(r)
