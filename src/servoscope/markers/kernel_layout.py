@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["FASTMATH", "LED_NP", "LED_NQ", "N_BINS", "NP", "NQ", "P", "Q", "atan2_nb", "atan2_np",
-           "chroma_window", "chroma_window_nb", "led_centre", "soft_moments_out"]
+           "chroma_window", "chroma_window_nb", "led_centre", "nearest_filled_bin", "soft_moments_out"]
 
 #: Angular bins of the background ring.
 N_BINS = 48
@@ -131,6 +131,22 @@ def led_centre(out, led):
     cx = ox + length * (led[1] * ex + led[2] * nx)
     cy = oy + length * (led[1] * ey + led[2] * ny)
     return cx, cy
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
+def nearest_filled_bin(cnt, k):
+    """Bin ``k`` of the background ring if it holds pixels, else the nearest one that does (either way round)."""
+    if cnt[k] != 0.0:
+        return k
+    n = cnt.shape[0]
+    for step in range(1, n):
+        a = (k - step) % n
+        if cnt[a] > 0.0:
+            return a
+        b = (k + step) % n
+        if cnt[b] > 0.0:
+            return b
+    return k
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")

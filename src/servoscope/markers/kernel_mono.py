@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from ..video.native import sample_at
-from .kernel_layout import FASTMATH, N_BINS, NP, atan2_nb, led_centre, soft_moments_out
+from .kernel_layout import FASTMATH, N_BINS, NP, atan2_nb, led_centre, nearest_filled_bin, soft_moments_out
 
 __all__ = ["MONO_LED_NQ", "MONO_NP", "MP", "mono_led_level", "track_frame_mono"]
 
@@ -209,17 +209,7 @@ def _marker_mono(img, packed, width, prm, out, buf):
         have_bg = ring_n >= 8.0
         if have_bg:
             for k in range(N_BINS):
-                src = k
-                if cnt[k] == 0.0:
-                    for step in range(1, N_BINS):
-                        a = (k - step) % N_BINS
-                        if cnt[a] > 0.0:
-                            src = a
-                            break
-                        b = (k + step) % N_BINS
-                        if cnt[b] > 0.0:
-                            src = b
-                            break
+                src = nearest_filled_bin(cnt, k)
                 bg[k] = bs[src] / cnt[src]
         m00 = 0.0
         m10 = 0.0

@@ -7,7 +7,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernel_layout import FASTMATH, N_BINS, atan2_nb, chroma_window_nb, led_centre, soft_moments_out
+from .kernel_layout import (FASTMATH, N_BINS, atan2_nb, chroma_window_nb, led_centre, nearest_filled_bin,
+                            soft_moments_out)
 
 __all__ = ["led_level_numba", "track_frame_numba"]
 
@@ -269,17 +270,7 @@ def _marker_nb(Y, U, V, row_off, row_step, prm, out, buf):
         have_bg = ring_n >= 8.0
         if have_bg:
             for k in range(N_BINS):
-                src = k
-                if cnt[k] == 0.0:
-                    for step in range(1, N_BINS):
-                        a = (k - step) % N_BINS
-                        if cnt[a] > 0.0:
-                            src = a
-                            break
-                        b = (k + step) % N_BINS
-                        if cnt[b] > 0.0:
-                            src = b
-                            break
+                src = nearest_filled_bin(cnt, k)
                 my[k] = bsy[src] / cnt[src]
                 mu[k] = bsu[src] / cnt[src]
                 mv[k] = bsv[src] / cnt[src]
