@@ -51,7 +51,7 @@ from .led_level import LED_PEAK_FRAMES, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
-from .refind import refind
+from .refind import refind, search_window
 
 __all__ = ["run_mono"]
 
@@ -126,22 +126,6 @@ def _learn(tracker: MarkerTracker, frame: NativeFrame, m: Moments, margin_px: fl
     prm[MP.MIN_CONTRAST] = MIN_CONTRAST_DN8 * dn8
     tracker.mono.radius = float(prm[MP.RADIUS])
     tracker.mono.edge = 1.0 + float(prm[MP.STEP])
-
-
-def _window(tracker: MarkerTracker, shape, centre=None) -> tuple[int, int, int, int] | None:
-    """The marker's search window around its prediction (or ``centre``), clipped to the frame; None when empty."""
-    h, w = shape
-    c = tracker.predicted_xy() if centre is None else centre
-    if c is None:
-        return None
-    r = tracker.search_radius_px + tracker.extent_px if centre is None else tracker.extent_px + 6.0
-    x0 = int(max(0, math.floor(c[0] - r)))
-    y0 = int(max(0, math.floor(c[1] - r)))
-    x1 = int(min(w, math.ceil(c[0] + r) + 1))
-    y1 = int(min(h, math.ceil(c[1] + r) + 1))
-    if x1 - x0 <= 2 or y1 - y0 <= 2:
-        return None
-    return x0, y0, x1, y1
 
 
 def _blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob | None:
@@ -295,17 +279,17 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
                 _learn(tracker, frame, blob.moments, settings.support_margin_px)
             for k, tracker in enumerate(trackers):
                 m = first[tracker.name].moments
-                measure_one(k, frame, _window(tracker, shape, (m.x_px, m.y_px)))
+                measure_one(k, frame, search_window(tracker, shape, (m.x_px, m.y_px)))
                 tracker.mono.class_area = float(out[k, K.Q.N]) if out[k, K.Q.N] > 0 else None
             learned = True
             slow = True
         windows = []
         for k, tracker in enumerate(trackers):
             params[k] = tracker.mono.prm
-            window = _window(tracker, shape) if tracker.has_position or not slow else None
+            window = search_window(tracker, shape) if tracker.has_position or not slow else None
             if window is None and slow:
                 m = first[tracker.name].moments  # the first frame: around the found blob
-                window = _window(tracker, shape, (m.x_px, m.y_px))
+                window = search_window(tracker, shape, (m.x_px, m.y_px))
             windows.append(window)
             if window is None:
                 params[k, MP.ENABLED] = 0.0
@@ -326,9 +310,10 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
                 # Lost or implausible in the predicted window: found in the whole frame (RGB, components),
                 # then measured by the kernel around what was found.
                 slow = True
-                blob, why = refind(tracker, frame.rgb,
-                                   lambda c, k=k, tracker=tracker: measure_one(k, frame, _window(tracker, shape, c), c),
-                                   out[k])
+                def at(c, k=k, tracker=tracker):
+                    return measure_one(k, frame, search_window(tracker, shape, c), c)
+
+                blob, why = refind(tracker, frame.rgb, at, out[k])
                 if blob is None:
                     reason = reason or why
                     continue

@@ -1,7 +1,8 @@
-"""A marker lost from its tracking window, found again in the whole frame: the engines' shared slow path."""
+"""The engines' shared per-marker steps: the search window, and a marker lost from it found again in the whole frame."""
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import numpy as np
@@ -9,7 +10,28 @@ import numpy as np
 from .kernel_layout import Q
 from .marker_state import Blob, MarkerTracker
 
-__all__ = ["refind"]
+__all__ = ["refind", "search_window"]
+
+
+def search_window(tracker: MarkerTracker, shape: tuple[int, int], centre: tuple[float, float] | None = None
+                  ) -> tuple[int, int, int, int] | None:
+    """The marker's search window (x0, y0, x1, y1; half-open px) around its prediction, clipped to the frame.
+
+    Around ``centre`` instead (a blob just found): the marker's extent and 6 px. None when
+    there is no prediction or the window is empty.
+    """
+    h, w = shape
+    c = tracker.predicted_xy() if centre is None else centre
+    if c is None:
+        return None
+    r = tracker.search_radius_px + tracker.extent_px if centre is None else tracker.extent_px + 6.0
+    x0 = int(max(0, math.floor(c[0] - r)))
+    y0 = int(max(0, math.floor(c[1] - r)))
+    x1 = int(min(w, math.ceil(c[0] + r) + 1))
+    y1 = int(min(h, math.ceil(c[1] + r) + 1))
+    if x1 - x0 <= 2 or y1 - y0 <= 2:
+        return None
+    return x0, y0, x1, y1
 
 
 def refind(tracker: MarkerTracker, rgb: np.ndarray, measure_at: Callable[[tuple[float, float]], Blob | None],

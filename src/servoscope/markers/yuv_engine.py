@@ -28,7 +28,7 @@ from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
-from .refind import refind
+from .refind import refind, search_window
 
 __all__ = ["run_yuv"]
 
@@ -217,21 +217,6 @@ def _separate_hues(states: list[_YuvState], led_rgb) -> None:
         st.prm[K.P.COS_TOL] = math.cos(max(tol, math.radians(4.0)))
 
 
-def _window(tracker: MarkerTracker, shape, centre=None) -> tuple[int, int, int, int] | None:
-    h, w = shape
-    c = tracker.predicted_xy() if centre is None else centre
-    if c is None:
-        return None
-    r = tracker.search_radius_px + tracker.extent_px if centre is None else tracker.extent_px + 6.0
-    x0 = int(max(0, math.floor(c[0] - r)))
-    y0 = int(max(0, math.floor(c[1] - r)))
-    x1 = int(min(w, math.ceil(c[0] + r) + 1))
-    y1 = int(min(h, math.ceil(c[1] + r) + 1))
-    if x1 - x0 <= 2 or y1 - y0 <= 2:
-        return None
-    return x0, y0, x1, y1
-
-
 def _kernel_blob(tracker: MarkerTracker, row: np.ndarray, window, shape) -> Blob | None:
     """The marker's blob from its kernel output row, or None when the window's class is implausible."""
     st = tracker.yuv
@@ -366,7 +351,7 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
                     tracker.yuv.beta0 = math.atan2(ml.y_px - mt.y_px, ml.x_px - mt.x_px)
             for k, tracker in enumerate(trackers):
                 m = first[tracker.name].moments
-                window = _window(tracker, shape, (m.x_px, m.y_px))
+                window = search_window(tracker, shape, (m.x_px, m.y_px))
                 measure_one(k, frame, window)
                 tracker.yuv.class_area = float(out[k, K.Q.N]) if out[k, K.Q.N] > 0 else None
             learned = True
@@ -378,10 +363,10 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
             if tracker.yuv.phi0 is not None and beta is not None:
                 _orient(tracker.yuv.prm, tracker.yuv.phi0 + beta - tracker.yuv.beta0)
             params[k] = tracker.yuv.prm
-            window = _window(tracker, shape) if tracker.has_position or not slow else None
+            window = search_window(tracker, shape) if tracker.has_position or not slow else None
             if window is None and slow:
                 m = first[tracker.name].moments  # the first frame: around the found blob
-                window = _window(tracker, shape, (m.x_px, m.y_px))
+                window = search_window(tracker, shape, (m.x_px, m.y_px))
             windows.append(window)
             if window is None:
                 params[k, K.P.ENABLED] = 0.0
@@ -396,9 +381,10 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
                 # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
                 # then measure it with the kernel around what was found.
                 slow = True
-                blob, why = refind(tracker, frame.rgb,
-                                   lambda c, k=k, tracker=tracker: measure_one(k, frame, _window(tracker, shape, c), c),
-                                   out[k])
+                def at(c, k=k, tracker=tracker):
+                    return measure_one(k, frame, search_window(tracker, shape, c), c)
+
+                blob, why = refind(tracker, frame.rgb, at, out[k])
                 if blob is None:
                     reason = reason or why
                     continue
