@@ -149,11 +149,16 @@ def overlay_figure(
     ax.imshow(frame_rgb, interpolation="nearest")
     lx, ly = lead_xy_px
     tx, ty = trail_xy_px
-    ax.plot([tx, lx], [ty, ly], "-", color="white", lw=1.2)
+    # White drawn over a black edge: seen on coloured stickers and on a monochrome camera's white dots alike.
+    from matplotlib import patheffects
+
+    edge = [patheffects.withStroke(linewidth=3.0, foreground="black")]
+    ax.plot([tx, lx], [ty, ly], "-", color="white", lw=1.2, path_effects=edge)
     ax.plot([tx, lx], [ty, ty], "--", color="white", lw=0.8, alpha=0.7)
     for (x, y), name in (((lx, ly), "lead"), ((tx, ty), "trail")):
-        ax.plot([x], [y], "s", ms=7, mfc="none", mec="white", mew=1.5)
-        ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", color="white", fontsize=9)
+        ax.plot([x], [y], "s", ms=7, mfc="none", mec="white", mew=1.5, path_effects=edge)
+        ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", color="white", fontsize=9,
+                    path_effects=edge)
     ax.set_title(title or f"Detected centroids, θ = {np.degrees(angle_rad):.3f}° (paper Fig. 4)")
     ax.set_axis_off()
     fig.tight_layout()
