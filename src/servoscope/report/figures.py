@@ -14,6 +14,7 @@ import matplotlib
 matplotlib.use("Agg")  # no display: figures are files and embedded images
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from ..sysid.plotting import (  # noqa: E402
@@ -27,6 +28,10 @@ from ..sysid.plotting import (  # noqa: E402
 )
 
 __all__ = ["amplitude_figure", "bode_figure", "dwell_figure", "step_figure", "overlay_figure", "segmentation_figure"]
+
+
+#: White marks drawn over a black edge: seen on coloured stickers and on a monochrome camera's white dots alike.
+_EDGE = [patheffects.withStroke(linewidth=3.0, foreground="black")]
 
 
 def bode_figure(
@@ -149,10 +154,7 @@ def overlay_figure(
     ax.imshow(frame_rgb, interpolation="nearest")
     lx, ly = lead_xy_px
     tx, ty = trail_xy_px
-    # White drawn over a black edge: seen on coloured stickers and on a monochrome camera's white dots alike.
-    from matplotlib import patheffects
-
-    edge = [patheffects.withStroke(linewidth=3.0, foreground="black")]
+    edge = _EDGE
     ax.plot([tx, lx], [ty, ly], "-", color="white", lw=1.2, path_effects=edge)
     ax.plot([tx, lx], [ty, ty], "--", color="white", lw=0.8, alpha=0.7)
     for (x, y), name in (((lx, ly), "lead"), ((tx, ty), "trail")):
@@ -198,11 +200,11 @@ def segmentation_figure(
         x1, y1 = int(min(w, x + zoom_px)), int(min(h, y + zoom_px))
         ax.imshow(frame_rgb[y0:y1, x0:x1], interpolation="nearest", extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5))
         ax.contour(np.arange(x0, x1), np.arange(y0, y1), masks[name][y0:y1, x0:x1].astype(float), levels=[0.5], colors="white", linewidths=0.8)
-        ax.plot([x], [y], "s", ms=6, mfc="none", mec="white", mew=1.5)
+        ax.plot([x], [y], "s", ms=6, mfc="none", mec="white", mew=1.5, path_effects=_EDGE)
         ax.set_title(f"{name}: ({x:.2f}, {y:.2f}) px", fontsize=9)
     for ax, name in zip(axes[:1], ["all"]):
         for n, (x, y) in centroids_xy_px.items():
-            ax.plot([x], [y], "s", ms=5, mfc="none", mec="white", mew=1.2)
+            ax.plot([x], [y], "s", ms=5, mfc="none", mec="white", mew=1.2, path_effects=_EDGE)
     for ax in axes:
         ax.set_axis_off()
     fig.tight_layout()
