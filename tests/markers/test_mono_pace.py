@@ -2,8 +2,8 @@
 
 The LED search's candidates measured in one compiled call on the native samples
 (:meth:`~servoscope.markers.led_search.LedSearch.measure_native`, packed 12-bit
-read in place) against :meth:`~servoscope.markers.led_search.LedSearch.measure`
-on the unpacked samples; the duplicate-frame check started from any row.
+read in place) against NumPy's masks of the same disks on the unpacked samples;
+the duplicate-frame check started from any row.
 """
 
 from __future__ import annotations
@@ -27,6 +27,36 @@ def _search() -> LedSearch:
                       LedCandidate(-40.0, 10.0, 2.0, np.array([-3.0, 0.0]))], 0, None)
 
 
+def _numpy_disk(image, cx, cy, r):
+    """The oracle: NumPy's mask of the disk, its mean (exact for integer samples) and maximum; NaN off the picture."""
+    yy, xx = np.mgrid[0:image.shape[0], 0:image.shape[1]]
+    inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    if not inside.any():
+        return math.nan, math.nan
+    px = image[inside].astype(np.float64)
+    return float(px.mean()), float(px.max())
+
+
+def _numpy_measure(search, image, lead, trail):
+    """Each candidate's disks by :func:`_numpy_disk`, placed as LedSearch.find placed them (Python floats)."""
+    for c in search.candidates:
+        r = 1.5 * c.radius_px + 1.0
+        level, peak = _numpy_disk(image, c.x_px, c.y_px, r)
+        c.fixed.append(level)
+        c.peak_fixed.append(peak)
+        if lead is None or trail is None:
+            c.borne.append(math.nan)
+            continue
+        ox, oy = trail.x_px, trail.y_px
+        ax, ay = lead.x_px - ox, lead.y_px - oy
+        length = math.hypot(ax, ay)
+        ex, ey = ax / length, ay / length
+        u, v = float(c.local[0]), float(c.local[1])
+        level, peak = _numpy_disk(image, ox + length * (u * ex - v * ey), oy + length * (u * ey + v * ex), r)
+        c.borne.append(level)
+        c.peak_borne.append(peak)
+
+
 @pytest.mark.parametrize("word_bits, bits", [(8, 8), (12, 12), (16, 12)])
 def test_led_candidates_in_one_call_are_measure_to_the_bit(tmp_path, word_bits, bits):
     rng = np.random.default_rng(11)
@@ -37,12 +67,19 @@ def test_led_candidates_in_one_call_are_measure_to_the_bit(tmp_path, word_bits, 
     markers = [(lead, trail), (None, trail), (lead, trail)]
     general, native = _search(), _search()
     for f, (a, b) in zip(iter_native_frames(w.cih), markers):
-        general.measure(f.gray if f.packed else f.samples, a, b)
+        _numpy_measure(general, f.gray, a, b)
         native.measure_native(f.samples, f.packed, f.width, a, b)
     for g, n in zip(general.candidates, native.candidates):
         for name in ("fixed", "borne", "peak_fixed", "peak_borne"):
             x, y = getattr(g, name), getattr(n, name)
             assert len(x) == len(y) and all(u == v or (math.isnan(u) and math.isnan(v)) for u, v in zip(x, y)), name
+    # measure() on a 2-D image is the same call: the same levels on the unpacked samples.
+    again = _search()
+    for f, (a, b) in zip(iter_native_frames(w.cih), markers):
+        again.measure(f.gray, a, b)
+    for c, n in zip(again.candidates, native.candidates):
+        for name in ("fixed", "borne", "peak_fixed", "peak_borne"):
+            np.testing.assert_array_equal(getattr(c, name), getattr(n, name))
     assert math.isnan(native.candidates[2].fixed[0]) and not math.isnan(native.candidates[1].fixed[0])
     assert math.isnan(native.candidates[0].borne[1])  # a marker missing: not carried
 

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, disk_level, disks_native, input_start
+from .led_level import LED_PEAK_FRAMES, LED_STAY_FRAMES, InputStart, disks_native, input_start
 from .moments import Moments
 
 __all__ = ["LED_STAY_FRAMES", "LedCandidate", "LedSearch", "led_input_start", "switch_of"]
@@ -59,25 +59,22 @@ def _axes(lead: Moments, trail: Moments):
     return origin, e, np.array([-e[1], e[0]]), length
 
 
-def _disk(image: np.ndarray, cx: float, cy: float, r: float) -> tuple[float, float]:
-    """Mean and peak of ``image`` (luma; RGB: its luma) in a disk; NaN off the picture."""
-    if image.ndim == 2:
-        return disk_level(image, cx, cy, r)
+def _rgb_disk(image: np.ndarray, cx: float, cy: float, r: float) -> float:
+    """Mean BT.601 luma of an RGB image in a disk; NaN off the picture."""
     if not (math.isfinite(cx) and math.isfinite(cy)):
-        return math.nan, math.nan
+        return math.nan
     h, w = image.shape[:2]
     x0, x1 = int(max(0, math.floor(cx - r))), int(min(w, math.floor(cx + r) + 1))
     y0, y1 = int(max(0, math.floor(cy - r))), int(min(h, math.floor(cy + r) + 1))
     if x1 <= x0 or y1 <= y0:
-        return math.nan, math.nan
+        return math.nan
     yy, xx = np.mgrid[y0:y1, x0:x1]
     inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
     px = np.asarray(image[y0:y1, x0:x1])[inside]
     if px.size == 0:
-        return math.nan, math.nan
-    # RGB: BT.601 luma, as the YUV engines read it (a lit yellow LED's red clips at 255; its luma does not).
-    px = px.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
-    return float(px.mean()), float(px.max())
+        return math.nan
+    # BT.601 luma, as the YUV engines read it (a lit yellow LED's red clips at 255; its luma does not).
+    return float((px.astype(np.float64) @ np.array([0.299, 0.587, 0.114])).mean())
 
 
 class LedSearch:
@@ -158,30 +155,32 @@ class LedSearch:
                 c.peak_borne.append(borne_peak)
 
     def measure(self, image: np.ndarray, lead: Moments | None, trail: Moments | None) -> None:
-        """Each candidate's level in this frame (``image``: luma, or RGB), fixed and carried by the markers."""
+        """Each candidate's level in this frame (``image``: luma, or RGB), fixed and carried by the markers.
+
+        A 2-D image (a luma plane, samples) is :meth:`measure_native`'s, in one compiled call;
+        an RGB image (the reference engine's) is measured disk by disk in its BT.601 luma,
+        without peaks.
+        """
+        if image.ndim == 2:
+            self.measure_native(image, False, image.shape[1], lead, trail)
+            return
         axes = None
         if lead is not None and trail is not None:
-            # Python floats: NumPy's 2-vectors cost more than the compiled disk itself.
+            # Python floats: NumPy's 2-vectors cost more than the disk itself.
             ox, oy = trail.x_px, trail.y_px
             ax, ay = lead.x_px - ox, lead.y_px - oy
             length = math.hypot(ax, ay)
             axes = (ox, oy, ax / length, ay / length, length)
         for c in self.candidates:
             r = 1.5 * c.radius_px + 1.0
-            level, peak = _disk(image, c.x_px, c.y_px, r)
-            c.fixed.append(level)
-            if image.ndim == 2 and len(c.peak_fixed) < LED_PEAK_FRAMES:
-                c.peak_fixed.append(peak)
+            c.fixed.append(_rgb_disk(image, c.x_px, c.y_px, r))
             if axes is None:
                 c.borne.append(math.nan)
                 continue
             ox, oy, ex, ey, length = axes
             u, v = float(c.local[0]), float(c.local[1])
             # Along the axis e and across it (−e_y, e_x), as LedSearch.find placed it.
-            level, peak = _disk(image, ox + length * (u * ex - v * ey), oy + length * (u * ey + v * ex), r)
-            c.borne.append(level)
-            if image.ndim == 2 and len(c.peak_borne) < LED_PEAK_FRAMES:
-                c.peak_borne.append(peak)
+            c.borne.append(_rgb_disk(image, ox + length * (u * ex - v * ey), oy + length * (u * ey + v * ex), r))
 
     def signals(self, n: int):
         """(candidate, "fixed" or "blade", levels over all ``n`` frames, peaks) for each candidate and mode."""
