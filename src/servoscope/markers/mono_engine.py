@@ -51,7 +51,7 @@ from .led_level import LED_PEAK_FRAMES, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
-from .refind import refind, search_window
+from .refind import search_window, take_markers
 
 __all__ = ["run_mono"]
 
@@ -256,7 +256,6 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
         gain = gain_of(frame)
         gains.append(gain)
         found: dict[str, Blob] = {}
-        reason = ""
         slow = False
         if not learned:
             rgb = frame.rgb
@@ -304,22 +303,9 @@ def run_mono(job: EngineInput, log: TrackLog) -> None:
         start = windows[0][1] if windows[0] is not None else shape[0] // 2
         repeated = prev is not None and _same_samples(prev, samples, start)
         prev = samples
-        for k, tracker in enumerate(trackers):
-            blob = _blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
-            if blob is None:
-                # Lost or implausible in the predicted window: found in the whole frame (RGB, components),
-                # then measured by the kernel around what was found.
-                slow = True
-                def at(c, k=k, tracker=tracker):
-                    return measure_one(k, frame, search_window(tracker, shape, c), c)
-
-                blob, why = refind(tracker, frame.rgb, at, out[k])
-                if blob is None:
-                    reason = reason or why
-                    continue
-            tracker.accept(blob, None)
-            found[tracker.name] = blob
-            reason = reason or blob.flaw
+        reason, took_slow = take_markers(trackers, windows, out, shape, _blob, lambda: frame.rgb,
+                                         lambda k, window, centre: measure_one(k, frame, window, centre), found)
+        slow = slow or took_slow
         led_level = led_peak = None
         if log.led_search is not None:
             # Every candidate's disks in one compiled call on the samples as stored (packed ones too).

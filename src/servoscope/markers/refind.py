@@ -10,7 +10,7 @@ import numpy as np
 from .kernel_layout import Q
 from .marker_state import Blob, MarkerTracker
 
-__all__ = ["refind", "search_window"]
+__all__ = ["refind", "search_window", "take_markers"]
 
 
 def search_window(tracker: MarkerTracker, shape: tuple[int, int], centre: tuple[float, float] | None = None
@@ -68,3 +68,40 @@ def refind(tracker: MarkerTracker, rgb: np.ndarray, measure_at: Callable[[tuple[
         out_row[Q.M00], out_row[Q.X], out_row[Q.Y] = m.m00, m.x_px, m.y_px
         return rgb_blob, ""
     return blob, ""
+
+
+def take_markers(trackers, windows: list, out: np.ndarray, shape: tuple[int, int],
+                 blob_of: Callable[[MarkerTracker, np.ndarray, tuple, tuple[int, int]], Blob | None],
+                 rgb: Callable[[], np.ndarray], measure_one: Callable[..., Blob | None],
+                 found: dict[str, Blob]) -> tuple[str, bool]:
+    """Each marker's blob from its kernel row, or found again in the whole frame; accepted, into ``found``.
+
+    The engines' per-frame step after their kernel call. ``blob_of(tracker, row,
+    window, shape)`` reads a kernel row (None: implausible in the window);
+    ``measure_one(k, window, centre)`` runs the kernel for marker ``k`` alone;
+    ``rgb()`` gives the frame's RGB image, made only when a marker is looked for in
+    the whole frame (:func:`refind`).
+
+    Returns
+    -------
+    (str, bool)
+        The frame's first flaw (or why a marker was not found; "" for none), and whether
+        a marker took the slow path.
+    """
+    reason, slow = "", False
+    for k, tracker in enumerate(trackers):
+        blob = blob_of(tracker, out[k], windows[k], shape) if windows[k] is not None else None
+        if blob is None:
+            slow = True
+
+            def at(c, k=k, tracker=tracker):
+                return measure_one(k, search_window(tracker, shape, c), c)
+
+            blob, why = refind(tracker, rgb(), at, out[k])
+            if blob is None:
+                reason = reason or why
+                continue
+        tracker.accept(blob, None)
+        found[tracker.name] = blob
+        reason = reason or blob.flaw
+    return reason, slow

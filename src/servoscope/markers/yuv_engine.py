@@ -28,7 +28,7 @@ from .led_level import LED_PEAK_FRAMES, disk_peak, locate_led
 from .led_search import follow_candidates
 from .marker_state import Blob, MarkerTracker
 from .moments import Moments
-from .refind import refind, search_window
+from .refind import search_window, take_markers
 
 __all__ = ["run_yuv"]
 
@@ -325,7 +325,6 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
         if band_of is not None:
             band_of.set_frame(frame.y)
         found: dict[str, Blob] = {}
-        reason = ""
         slow = False
         if not learned:
             rgb = frame.rgb
@@ -375,22 +374,9 @@ def run_yuv(job: EngineInput, engine: str, log: TrackLog) -> None:
                 params[k, K.P.X0:K.P.Y1 + 1] = window
         led_prm[0] = 1.0 if led_local is not None else 0.0
         kernel(frame.y, frame.u, frame.v, frame.row_offset, frame.row_step, params, led_prm, out, led_out)
-        for k, tracker in enumerate(trackers):
-            blob = _kernel_blob(tracker, out[k], windows[k], shape) if windows[k] is not None else None
-            if blob is None:
-                # Lost or implausible in the predicted window: find it in the whole frame (RGB, components),
-                # then measure it with the kernel around what was found.
-                slow = True
-                def at(c, k=k, tracker=tracker):
-                    return measure_one(k, frame, search_window(tracker, shape, c), c)
-
-                blob, why = refind(tracker, frame.rgb, at, out[k])
-                if blob is None:
-                    reason = reason or why
-                    continue
-            tracker.accept(blob, None)
-            found[tracker.name] = blob
-            reason = reason or blob.flaw
+        reason, took_slow = take_markers(trackers, windows, out, shape, _kernel_blob, lambda: frame.rgb,
+                                         lambda k, window, centre: measure_one(k, frame, window, centre), found)
+        slow = slow or took_slow
         led_level = led_peak = None
         follow_candidates(log, frame.y, lambda: frame.rgb, led_model, found, settings.led_near, frame.row_offset,
                           frame.row_step)
