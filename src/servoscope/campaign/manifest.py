@@ -23,7 +23,7 @@ from ..errors import ServoscopeError
 from ..markers.colour import parse_colour
 from ..markers.selection import check_near
 from ..markers.settings import extra_marker_problems
-from ..video.frame_source import MANIFEST_KEYS, manifest_frame_source, source_name
+from ..video.frame_source import MANIFEST_KEYS, SOURCE_SEPARATOR, manifest_frame_source, source_name
 
 __all__ = ["TestSpec", "Campaign", "load_campaign"]
 
@@ -430,7 +430,8 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
     skipped: list[tuple[str, str]] = []
     # A camera's program names every recording's file alike (Photron's C001H001S0001.cihx, one folder
     # per recording; the twin's frames.cih): where raw files' stems repeat, their folders name them.
-    stems = [Path(str(e["frames"]).split("#")[0]).stem for e in raw_tests if isinstance(e, dict) and "frames" in e]
+    stems = [Path(str(e["frames"]).split(SOURCE_SEPARATOR)[0]).stem for e in raw_tests
+             if isinstance(e, dict) and "frames" in e]
     for i, entry in enumerate(raw_tests, start=1):
         where = f"tests[{i}]"
         if not isinstance(entry, dict):
@@ -443,7 +444,7 @@ def load_campaign(path: str | Path, *, check_videos: bool = True, keep_going: bo
             try:
                 video = manifest_frame_source(entry, base)
                 default_label = source_name(video)
-                raw = Path(str(entry["frames"]).split("#")[0])
+                raw = Path(str(entry["frames"]).split(SOURCE_SEPARATOR)[0])
                 if stems.count(raw.stem) > 1 and raw.stem == default_label and raw.parent.name:
                     default_label = raw.parent.name
             except ServoscopeError as exc:
