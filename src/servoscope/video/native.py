@@ -44,7 +44,7 @@ from .frame_source import is_frame_source, to_rgb8
 from .highspeed import PhantomCine, PhotronMraw
 from .sources import open_frame_source, prefetch
 
-__all__ = ["NativeFrame", "NativeSource", "iter_native_frames", "open_native", "sample_at", "unpack_rows"]
+__all__ = ["NativeFrame", "NativeSource", "iter_native_frames", "sample_at", "unpack_rows"]
 
 #: Limited-range luma of black and white (a video file's gray levels).
 VIDEO_BLACK_DN, VIDEO_WHITE_DN = 16.0, 235.0
@@ -226,11 +226,6 @@ class NativeSource:
             self._file.close()
             self._file = None
         self.source.close()
-
-
-def open_native(path: str | Path) -> NativeSource:
-    """A monochrome frame source opened for native views (:class:`NativeSource`)."""
-    return NativeSource(path)
 
 
 def iter_native_frames(path: str | Path, queue_size: int = 8) -> Iterator[NativeFrame]:
