@@ -41,6 +41,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .bench_process import run_process
 from .defaults import LEAD_COLOUR, LED_COLOUR, TRAIL_COLOUR
 
 __all__ = ["bench", "run_bench", "render_bench_clips", "check_targets", "gpu_bench", "BENCH_CLIPS", "TARGETS",
@@ -200,18 +201,6 @@ print(decode_only(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 0))
 """
 
 
-def _run_process(argv: list[str]) -> float:
-    """Wall-clock seconds of one process, start-up included; raises when it fails."""
-    import subprocess
-
-    start = time.perf_counter()
-    done = subprocess.run(argv, capture_output=True, text=True)
-    seconds = time.perf_counter() - start
-    if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(argv)} failed:\n{done.stderr[-2000:]}")
-    return seconds
-
-
 def whole_commands(clips: dict[str, Path], workdir: Path, repeat: int = 1, echo=None,
                    decode_threads: dict[str, int] | None = None) -> dict:
     """Whole-process timings: ``python -m servoscope track`` vs an OpenCV script and a decode-only script.
@@ -240,7 +229,7 @@ def whole_commands(clips: dict[str, Path], workdir: Path, repeat: int = 1, echo=
                 "decode": [sys.executable, str(decode), str(clip)]
                 + ([str(decode_threads[codec])] if decode_threads and codec in decode_threads else []),
             }
-            row = {f"{name}_s": min(_run_process(argv) for _ in range(max(1, repeat))) for name, argv in runs.items()}
+            row = {f"{name}_s": min(run_process(argv) for _ in range(max(1, repeat))) for name, argv in runs.items()}
             row["track_over_opencv"] = row["opencv_s"] / row["track_s"]
             row["track_over_decode"] = row["decode_s"] / row["track_s"]
             result[codec] = row

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .bench_process import run_process
+
 __all__ = ["DISTINCT_FRAMES", "MONO_TARGETS", "OPENCV_MONO_SCRIPT", "mono_bench", "opencv_mono", "read_only",
            "render_mono_clip"]
 
@@ -178,7 +180,6 @@ def _track(cih: Path, size: int, engine: str = "auto"):
 
 def _whole(cih: Path, size: int, threshold: float, workdir: Path, repeat: int) -> dict:
     """``python -m servoscope track`` and the OpenCV script as processes, best of ``repeat``: seconds and ratio."""
-    import subprocess
     import tempfile
 
     s = _settings(size)
@@ -189,16 +190,7 @@ def _whole(cih: Path, size: int, threshold: float, workdir: Path, repeat: int) -
                           "--lead", "bright@{:.1f},{:.1f}".format(*s.lead_near),
                           "--trail", "bright@{:.1f},{:.1f}".format(*s.trail_near), "--led", "bright"],
                 "opencv": [sys.executable, str(script), str(cih), f"{threshold:g}"]}
-        row = {}
-        for name, argv in runs.items():
-            best = math.inf
-            for _ in range(max(1, repeat)):
-                start = time.perf_counter()
-                done = subprocess.run(argv, capture_output=True, text=True)
-                best = min(best, time.perf_counter() - start)
-                if done.returncode != 0:
-                    raise RuntimeError(f"{' '.join(argv)} failed:\n{done.stderr[-2000:]}")
-            row[f"{name}_s"] = best
+        row = {f"{name}_s": min(run_process(argv) for _ in range(max(1, repeat))) for name, argv in runs.items()}
     row["track_over_opencv"] = row["opencv_s"] / row["track_s"]
     return row
 
