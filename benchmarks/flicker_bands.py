@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import servoscope.markers.yuv_engine as yuv_engine
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.simulate import simulate_campaign
 
 FPS, EXPOSURE_S, READOUT_S = 240, 0.002, 0.0035

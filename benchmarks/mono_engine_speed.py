@@ -29,7 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.frame_record import TrackLog
 from servoscope.video.frame_source import parse_frame_source
 from servoscope.video.highspeed import PhotronMraw

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from servoscope.camera import CameraModel
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.simulate import Scene, simulate_campaign
 from servoscope.simulate.clips import Occluder, render_clip
 from servoscope.video.reader import iter_frames

@@ -4,6 +4,9 @@ Read from the source with :mod:`ast` (nothing is imported), so a cycle made by a
 import inside a function counts as much as one at the top of a module: both make
 a stage depend on a later one.
 
+The stage order (issue 30) is one table, ``STAGE_RANK``: every top-level module or package
+of servoscope has a rank, and imports go only down it.
+
 ``KNOWN_CYCLES`` and ``KNOWN_PRIVATE`` list what issue 15 is still taking apart.
 The tests fail on anything new *and* on an entry that no longer happens, so the
 lists only shrink, and must be emptied by whoever fixes an entry.
@@ -167,6 +170,115 @@ def test_no_new_private_name_across_modules(graph):
     gone = KNOWN_PRIVATE - private
     assert not new, f"private names imported across modules (make them public or move them): {sorted(new)}"
     assert not gone, f"fixed, remove from KNOWN_PRIVATE: {sorted(gone)}"
+
+
+# The stage order (issue 30): each top-level module or package of servoscope (its *unit*) and its
+# rank. A unit imports only units of a lower rank; units of one rank are peers and import neither
+# each other nor anything above. From the bottom: the foundation every stage shares; the stages in
+# the order a video flows through them (video → markers → camera → angle → sysid: markers gives
+# pixel centroids and LED levels, the camera stage undistorts, times and maps them into the blade's
+# plane, the angle stage makes angles of them, sysid fits them); the pipeline, which runs stages
+# together for one video (track_video, a track's plane view, the overlay video); then what drives
+# whole campaigns (its manifest too); the twin and the rig, which write campaigns, and the report,
+# which shows one; the command line and the benchmarks on top.
+# A new top-level module gets a row here (the test below fails until it has one). No exemptions.
+STAGE_RANK: dict[str, int] = {
+    # foundation
+    "servoscope": 0,  # the package itself: __version__ and a lazy table of names; it imports nothing
+    "errors": 0,
+    "results": 1,
+    "defaults": 1,
+    "_io": 2,
+    "parameters": 2,
+    # the stages
+    "video": 3,
+    "markers": 4,
+    "camera": 5,
+    "angle": 6,
+    "sysid": 7,
+    # the stages run together
+    "pipeline": 8,
+    # above the pipeline
+    "campaign": 9,
+    "simulate": 10,
+    "rig": 10,
+    "report": 10,
+    # the command line and the benchmarks
+    "cli_options": 11,
+    "cli_plane": 11,
+    "cli_tables": 11,
+    "cli_track_checks": 11,
+    "bench_process": 11,
+    "bench_mono": 12,
+    "bench": 13,
+    "cli": 13,
+    "__main__": 14,
+}
+
+
+def _unit(module: str) -> str:
+    """The top-level module or package a servoscope module belongs to (``servoscope`` for the package)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def _against_the_order(edges: dict[str, set[str]], rank: dict[str, int]) -> tuple[set[str], list[tuple[str, str]]]:
+    """Units missing from ``rank``, and each import (importer, imported) to a unit of the same or a higher rank."""
+    unranked = {_unit(m) for m in edges} - set(rank)
+    wrong = sorted((m, t) for m, targets in edges.items() for t in targets
+                   if _unit(m) != _unit(t) and _unit(m) in rank and _unit(t) in rank
+                   and rank[_unit(t)] >= rank[_unit(m)])
+    return unranked, wrong
+
+
+def _imports_between(edges: dict[str, set[str]], a: str, b: str) -> list[tuple[str, str]]:
+    """Every import from unit ``a`` into unit ``b``."""
+    return sorted((m, t) for m, targets in edges.items() for t in targets if _unit(m) == a and _unit(t) == b)
+
+
+def test_the_order_checker_sees_an_import_up_and_a_missing_rank():
+    edges = {
+        "servoscope.video.reader": {"servoscope.errors", "servoscope.video.frames"},
+        "servoscope.video.frames": set(),
+        "servoscope.video.overlay": {"servoscope.camera.model"},  # up: video draws with the camera
+        "servoscope.camera.model": {"servoscope.video.reader", "servoscope.errors"},
+        "servoscope.camera.lens": {"servoscope.camera.model"},
+        "servoscope.simulate.render": {"servoscope.rig.plan"},  # a peer: the same rank
+        "servoscope.rig.plan": set(),
+        "servoscope.errors": set(),
+        "servoscope.extra": {"servoscope.errors"},  # not in the table
+    }
+    rank = {"errors": 0, "video": 1, "camera": 2, "simulate": 3, "rig": 3}
+    unranked, wrong = _against_the_order(edges, rank)
+    assert unranked == {"extra"}
+    assert wrong == [("servoscope.simulate.render", "servoscope.rig.plan"),
+                     ("servoscope.video.overlay", "servoscope.camera.model")]
+    assert _imports_between(edges, "video", "camera") == [("servoscope.video.overlay", "servoscope.camera.model")]
+    assert _imports_between(edges, "camera", "video") == [("servoscope.camera.model", "servoscope.video.reader")]
+    assert _unit("servoscope") == "servoscope" and _unit("servoscope.cli") == "cli"
+    del edges["servoscope.video.overlay"], edges["servoscope.simulate.render"], edges["servoscope.extra"]
+    assert _against_the_order(edges, rank) == (set(), [])
+
+
+def test_imports_follow_the_stage_order(graph):
+    edges, _ = graph
+    unranked, wrong = _against_the_order(edges, STAGE_RANK)
+    assert not unranked, f"give these a row in STAGE_RANK (tests/test_architecture.py): {sorted(unranked)}"
+    assert not wrong, ("imports against the stage order (a stage importing a later one or a peer: move the code "
+                       f"to the layer that needs both, e.g. servoscope.pipeline): {wrong}")
+
+
+def test_the_stages_before_the_camera_do_not_import_it(graph):
+    """video and camera do not import each other (only camera reads video); markers imports neither camera nor angle."""
+    edges, _ = graph
+    video_to_camera = _imports_between(edges, "video", "camera")
+    camera_to_video = _imports_between(edges, "camera", "video")
+    assert not (video_to_camera and camera_to_video), (
+        f"video and camera import each other: {video_to_camera}, {camera_to_video}")
+    assert not video_to_camera, f"video imports camera (the camera stage comes after video): {video_to_camera}"
+    for later in ("camera", "angle"):
+        found = _imports_between(edges, "markers", later)
+        assert not found, f"markers imports {later} (markers gives pixel centroids; servoscope.pipeline combines): {found}"
 
 
 # Modules may grow to about 500 lines; a few were far larger when this was written.

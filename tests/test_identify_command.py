@@ -252,7 +252,7 @@ def test_a_finished_run_replaces_the_previous_one_and_keeps_what_else_is_there(m
 
 
 def test_track_writes_its_csv_and_overlay_together_or_neither(mono, tmp_path, monkeypatch):
-    import servoscope.video.overlay as overlay_module
+    import servoscope.pipeline.overlay as overlay_module
 
     frames = mono[12][0].parent / "dwell_01_1.50Hz"
     csv, overlay = tmp_path / "t.csv", tmp_path / "t.mp4"

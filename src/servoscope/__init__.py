@@ -25,7 +25,7 @@ _EXPORTS = {
     "calibrate": "servoscope.camera.calibrate",
     "Track": "servoscope.markers",
     "TrackerSettings": "servoscope.markers",
-    "track_video": "servoscope.markers",
+    "track_video": "servoscope.pipeline",
     "Campaign": "servoscope.campaign",
     "IdentificationResult": "servoscope.campaign",
     "identify": "servoscope.campaign",

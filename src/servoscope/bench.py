@@ -11,7 +11,7 @@ frames/s (lighter frames), and measures in one run, on this machine:
   2, cores, cores + 1, 2·cores, 3·cores): the rate a decode-only program
   tuned for it would reach. ``track_over_best_decode`` is measured against
   that one;
-* **track**: :func:`servoscope.markers.track_video` (the default engine:
+* **track**: :func:`servoscope.pipeline.track_video` (the default engine:
   decoder thread + fused numba kernel on the YUV planes);
 * **opencv**: a user's OpenCV pipeline — decode → BGR → HSV → ``inRange`` ×2
   → ``cv2.moments`` ×2 per frame;
@@ -142,7 +142,8 @@ def opencv_pipeline(path: Path, lead: str = LEAD, trail: str = TRAIL) -> int:
 
 
 def _track(path: str) -> int:
-    from .markers import TrackerSettings, track_video
+    from .markers import TrackerSettings
+    from .pipeline import track_video
 
     return track_video(path, TrackerSettings(LEAD, TRAIL, LED)).n_frames
 

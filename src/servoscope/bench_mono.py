@@ -11,7 +11,7 @@ recording's. Measured in one run, in this process, each over the whole file:
 
 * **read**: the file alone, as a user's first look at it: pyMRAW's memory map,
   every frame touched once (its maximum): the pace of the disk and the page cache;
-* **servoscope**: :func:`~servoscope.markers.track_video` with the markers pinned
+* **servoscope**: :func:`~servoscope.pipeline.track_video` with the markers pinned
   by position, the engine ``auto`` picks (and, ``reference=True``, the RGB
   reference engine on the first frames, for the ratio the issue started from);
 * **opencv**: a user's first OpenCV script: for every frame, a threshold of the
@@ -171,7 +171,7 @@ def _settings(size: int, engine: str = "auto"):
 
 
 def _track(cih: Path, size: int, engine: str = "auto"):
-    from .markers import track_video
+    from .pipeline import track_video
 
     start = time.perf_counter()
     track = track_video(cih, _settings(size, engine))

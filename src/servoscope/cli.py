@@ -15,57 +15,11 @@ from pathlib import Path
 import click
 
 from .defaults import LEAD_COLOUR, LED_COLOUR, TIMESTAMP, TIMESTAMPS, TRAIL_COLOUR
+from .cli_options import (CampaignProgress, check_out_dir, footage_to_read, frame_source_options, parse_held,
+                          parse_order, parse_ties, progress_enabled)
 from .errors import ServoscopeError
 
 __all__ = ["main", "cli"]
-
-
-def _progress_enabled(quiet: bool) -> bool:
-    return not quiet and sys.stderr.isatty()
-
-
-class _Progress:
-    """A rich progress bar over a campaign's videos (videos done, frames/s, time left), or nothing."""
-
-    def __init__(self, enabled: bool, tests):
-        self.enabled = enabled
-        self.tests = list(tests)
-        self._bar = None
-        self._frames: dict[str, int] = {}
-        self._start = 0.0
-
-    def __enter__(self):
-        if self.enabled:
-            import time
-
-            from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self._bar = Progress(
-                TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} videos"),
-                TimeRemainingColumn(), transient=True,
-            )
-            self._bar.__enter__()
-            self._task = self._bar.add_task("tracking", total=len(self.tests))
-            self._start = time.perf_counter()
-        return self
-
-    def __call__(self, label: str, frames_done: int, index: int) -> None:
-        if self._bar is not None:
-            import time
-
-            self._frames[label] = frames_done
-            total = sum(self._frames.values())
-            rate = total / max(time.perf_counter() - self._start, 1e-9)
-            self._bar.update(self._task, description=f"tracking {label}: {total} frames, {rate:.0f} frames/s")
-
-    def done(self, label: str, status: str) -> None:
-        if self._bar is not None:
-            self._bar.advance(self._task)
-
-    def __exit__(self, *exc):
-        if self._bar is not None:
-            self._bar.__exit__(*exc)
-        return False
 
 
 class _LazyGroup(click.Group):
@@ -160,46 +114,6 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
     click.echo(f"wrote {outdir / manifest.name}")
 
 
-def _frame_source_options(command):
-    """--fps, --start, --timestamps, --bayer and --bits: what an image sequence or a raw file is read with."""
-    for option in reversed([
-        click.option("--fps", type=float, help="Frame rate of an image sequence (frames/s); overrides a raw file's header."),
-        click.option("--start", "start_s", type=float, default=0.0, show_default=True,
-                     help="Time of an image sequence's first frame, s."),
-        click.option("--timestamps", type=click.Path(dir_okay=False, path_type=Path),
-                     help="Text file with each frame's time (s), one per line, instead of --fps."),
-        click.option("--bayer", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
-                     help="Bayer pattern of raw (undemosaiced) frames."),
-        click.option("--bits", type=click.IntRange(1, 16),
-                     help="The samples' real bit depth where the files do not say it (12-bit frames in 16-bit TIFFs)."),
-    ]):
-        command = option(command)
-    return command
-
-
-def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path | None, bayer: str | None,
-             bits: int | None = None):
-    """What to read for VIDEO with the frame-source options: (path or source string, name, default CSV path)."""
-    from .video.frame_source import frame_source, is_frame_source, source_name
-
-    given = fps is not None or start_s or timestamps is not None or bayer is not None or bits is not None
-    if not is_frame_source(video):
-        if given:
-            raise ServoscopeError(f"{video}: --fps, --start, --timestamps, --bayer and --bits are for image sequences and "
-                                  "raw files; a video's frame times come from its own timestamps")
-        return video, video.name, video.with_name(video.stem + ".track.csv")
-    if fps is not None and not (math.isfinite(fps) and fps > 0):
-        raise ServoscopeError(f"{video}: --fps must be > 0 frames/s, got {fps}")
-    source = frame_source(video, fps=fps, start_s=start_s, timestamps=None if timestamps is None else timestamps.resolve(),
-                          bayer=None if bayer is None else bayer.upper(), bits=bits)
-    name = source_name(source)
-    import glob
-
-    # Beside the folder of a sequence (the glob's last plain folder), beside a raw file.
-    plain = [part for part in Path(str(video)).parts if not glob.has_magic(part)]
-    return source, name, Path(*plain or ["."]).parent / f"{name}.track.csv"
-
-
 @cli.command()
 @click.argument("video", type=click.Path(path_type=Path))
 @click.option("--lead", default=LEAD_COLOUR, show_default=True,
@@ -232,7 +146,7 @@ def _footage(video: Path, *, fps: float | None, start_s: float, timestamps: Path
 @click.option("--self-calibrate-plane", is_flag=True,
               help="Without a plane: correct the angles for the camera's view as the stickers tell it "
                    "(stickers' shapes and sizes: foreshortening and perspective; round or square stickers of one size).")
-@_frame_source_options
+@frame_source_options
 def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None, exposure_s: float | None,
           readout_s: float, timestamp: str, out_csv: Path | None, deinterlace: str, overlay: Path | None,
           reference: str | None, extra: tuple[str, ...], plane_json: Path | None, self_calibrate_plane: bool,
@@ -242,10 +156,11 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     VIDEO is a video file, a folder or quoted glob of TIFF/PNG/JPEG frames
     (with --fps), or a Photron .mraw/.cihx or Phantom .cine file.
     """
-    video, name, default_csv = _footage(video, **source)
+    video, name, default_csv = footage_to_read(video, **source)
     from ._io import staged_files
     from .camera import CameraModel
-    from .markers import TrackerSettings, parse_colour, track_video
+    from .markers import TrackerSettings, parse_colour
+    from .pipeline import track_video
     from .markers.selection import parse_marker_spec
     from .cli_plane import load_plane_option, track_in_view
     from .cli_track_checks import refuse_too_few_valid
@@ -300,7 +215,7 @@ def track(video: Path, lead: str, trail: str, led: str, calibration: Path | None
     with staged_files(out_csv, overlay) as (tmp_csv, tmp_overlay):  # both written, or neither
         result.to_csv(tmp_csv)
         if overlay is not None:
-            from .video.overlay import write_overlay
+            from .pipeline.overlay import write_overlay
 
             write_overlay(video, result, tmp_overlay, camera=camera, plane=plane)
     from .cli_tables import print_track_counts
@@ -333,37 +248,15 @@ def _say_frame_of_reference_and_shutter(name: str, result, exposure_s: float | N
         click.echo(f"{name}: exposure: {blur_evidence(result).describe()}")
 
 
-def _parse_held(fix_text: tuple[str, ...], bound_text: tuple[str, ...]
-                ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
-    """``--fix NAME=VALUE`` and ``--bound NAME=LOW:HIGH`` as dicts; one clear error for anything else."""
-    fix: dict[str, float] = {}
-    bounds: dict[str, tuple[float, float]] = {}
-    for text in fix_text:
-        name, _, value = text.partition("=")
-        try:
-            fix[name.strip()] = float(value)
-        except ValueError:
-            raise ServoscopeError(f"--fix {text!r}: give NAME=VALUE, e.g. --fix damping_ratio=0.8") from None
-    for text in bound_text:
-        name, _, limits = text.partition("=")
-        low, _, high = limits.partition(":")
-        try:
-            bounds[name.strip()] = (float(low), float(high))
-        except ValueError:
-            raise ServoscopeError(f"--bound {text!r}: give NAME=LOW:HIGH, e.g. --bound natural_frequency_rad_s=20:80") \
-                from None
-    return fix, bounds
-
-
 @cli.command()
 @click.argument("footage", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
-@_frame_source_options
+@frame_source_options
 def info(footage: Path, as_json: bool, **source) -> None:
     """Say what servoscope reads from FOOTAGE: format, size, frames, frame rate and where it came from, bit depth."""
     from .video.info import describe_footage, format_description
 
-    path, _, _ = _footage(footage, **source)
+    path, _, _ = footage_to_read(footage, **source)
     described = describe_footage(path)
     if as_json:
         import json
@@ -377,10 +270,10 @@ def info(footage: Path, as_json: bool, **source) -> None:
 @click.argument("video", type=click.Path(path_type=Path))
 @click.option("--frame", "frame_index", default=0, show_default=True, type=int, help="Frame to look at (0-based).")
 @click.option("--out", "out_png", type=click.Path(dir_okay=False, path_type=Path), help="Picture with the candidates numbered (PNG).")
-@_frame_source_options
+@frame_source_options
 def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> None:
     """List the coloured blobs (on monochrome footage: the bright ones) in a frame of VIDEO, to choose the markers."""
-    video, name, _ = _footage(video, **source)
+    video, name, _ = footage_to_read(video, **source)
     import cv2
 
     from .cli_tables import print_candidates
@@ -450,14 +343,9 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     from .report import write_report
     from .sysid import check_held
 
-    order = _parse_order(order_text)
-    fix, bounds = _parse_held(fix_text, bound_text)
-    ties = {}
-    for text in tie_text:
-        name, _, expression = text.partition("=")
-        if not name.strip() or not expression.strip():
-            raise ServoscopeError(f"--tie {text!r}: give NAME=EXPR, e.g. --tie rate_limit_rad_s=4*gain")
-        ties[name.strip()] = expression.strip()
+    order = parse_order(order_text)
+    fix, bounds = parse_held(fix_text, bound_text)
+    ties = parse_ties(tie_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
     held = manifest.held_parameters(fix, bounds)
     check_nonlinear(manifest, nonlinear, order, *held, {**manifest.model_ties, **ties})
@@ -466,13 +354,13 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if self_calibrate_plane and manifest.plane is not None:
         raise ServoscopeError(f"{campaign}: [camera] plane is given: --self-calibrate-plane is for footage without a "
                               "plane; leave one of them out")
-    _check_out_dir(out_dir, manifest)
+    check_out_dir(out_dir, manifest)
     from ._io import staged_folder
 
     failures: dict[str, str] = {}
     # Built aside and moved into place whole (the track cache, .cache, is written in place and kept).
     with staged_folder(out_dir, keep=(".cache",), last=("result.json",)) as stage:
-        with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+        with CampaignProgress(progress_enabled(quiet), manifest.tests) as progress:
             tracks = track_campaign(
                 manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
                 workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache",
@@ -489,34 +377,6 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     elif not quiet:
         print_model(result)
         click.echo(f"report: {out_dir / 'report.html'}")
-
-
-def _parse_order(text: str):
-    """'auto', 'NA' or 'NB,NA' → "auto" or (nb, na), checked."""
-    text = text.strip().lower()
-    if text == "auto":
-        return "auto"
-    try:
-        parts = [int(p) for p in text.replace(" ", "").split(",")]
-    except ValueError:
-        parts = []
-    if len(parts) == 1:
-        parts = [0, parts[0]]
-    if len(parts) != 2 or not (0 <= parts[0] < parts[1] <= 4):
-        raise ServoscopeError(f"--order {text!r}: use 'auto', NA (1–4) or NB,NA with 0 ≤ NB < NA ≤ 4")
-    return tuple(parts)
-
-
-def _check_out_dir(out_dir: Path, manifest) -> None:
-    """Refuse an --out whose outputs would overwrite an input."""
-    inputs = {t.video.resolve() for t in manifest.tests} | {manifest.path.resolve()}
-    out = out_dir.resolve()
-    names = ["result.json", "report.html", "frequency_response.csv"] + [f"tracks/{t.label}.csv" for t in manifest.tests]
-    for name in names:
-        if (out / name).resolve() in inputs:
-            raise ServoscopeError(f"--out {out_dir}: writing {name} there would overwrite an input; choose another folder")
-    if out.exists() and not out.is_dir():
-        raise ServoscopeError(f"--out {out_dir}: exists and is not a folder")
 
 
 @cli.command()
@@ -540,7 +400,7 @@ def demo(out_dir: Path, preset: str, seed: int, quiet: bool) -> None:
     manifest = load_campaign(manifest_path)
     click.echo(f"tracking {len(manifest.tests)} videos and identifying …")
     with staged_folder(out_dir / "result", last=("result.json",)) as stage:
-        with _Progress(_progress_enabled(quiet), manifest.tests) as progress:
+        with CampaignProgress(progress_enabled(quiet), manifest.tests) as progress:
             result = run_identify(manifest, progress=progress)
         write_report(result, stage)
     truth = json.loads((manifest_path.parent / "truth.json").read_text())

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from .camera.plane import Plane
-from .markers.plane_view import pooled_view, told_view, view_warning, with_view_correction
+from .pipeline.plane_view import pooled_view, told_view, view_warning, with_view_correction
 from .errors import ServoscopeError
 
 __all__ = ["load_plane_option", "track_in_view"]
@@ -51,9 +52,7 @@ def track_in_view(name: str, result, self_calibrate: bool, camera=None, plane: P
     view = pooled_view([result], camera, plane)
     if not self_calibrate:
         said = view_warning(view, plane=result.plane, lens=camera is not None or plane is not None)
-        if said:
-            result.warnings.append(said)
-        return result
+        return replace(result, warnings=(*result.warnings, said)) if said else result
     view = told_view(view, name)
     click.echo(f"{name}: angles corrected for the camera's view: {view.describe()} (resting on round or square "
                "stickers of one size)")

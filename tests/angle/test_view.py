@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from servoscope.angle.view import oblique_view
-from servoscope.markers.plane_view import view_warning
+from servoscope.pipeline.plane_view import view_warning
 
 
 def _filmed(yaw_deg: float, tilt_deg: float, swing_deg: float, *, noise_px: float = 0.02, n: int = 4000,

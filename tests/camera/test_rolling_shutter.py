@@ -23,7 +23,7 @@ from servoscope.campaign import identify, load_campaign
 from servoscope.campaign.cache import TrackCache, tracks_equal
 from servoscope.campaign.runner import _settings
 from servoscope.errors import ServoscopeError
-from servoscope.markers.tracker import TrackerSettings, track_video
+from servoscope.pipeline.tracker import TrackerSettings, track_video
 from servoscope.simulate import PAPER_SERVO, PRESETS, FrameRenderer, Scene, simulate_campaign
 from servoscope.video.writer import rgb_to_yuv420p
 

@@ -32,7 +32,7 @@ def test_extra_markers_bend_as_rendered_and_leave_the_pitch_alone(tmp_path):
     """Square stickers under H.264 (not the defaults the tracker was tuned on): each marker's bending is the
     renderer's, and the pitch is the two-marker pitch bit for bit."""
     from servoscope.camera import CameraModel
-    from servoscope.markers import TrackerSettings, track_video
+    from servoscope.pipeline import TrackerSettings, track_video
 
     _, truth = _render(tmp_path, frequencies_hz=(), codec="h264", sticker_shape="square")
     test = truth["tests"][0]
@@ -156,7 +156,7 @@ def test_a_campaign_with_extra_markers_end_to_end(tmp_path):
 
 def test_extra_markers_bad_input(tmp_path):
     from servoscope.campaign.manifest import load_campaign
-    from servoscope.markers import TrackerSettings, track_video
+    from servoscope.pipeline import TrackerSettings, track_video
 
     toml, truth = _render(tmp_path, frequencies_hz=(), extra_stickers=EXTRAS[:1], step_after_t0_s=0.4)
     video = tmp_path / truth["tests"][0]["video"]
@@ -183,7 +183,7 @@ def test_extra_markers_bad_input(tmp_path):
 
 def test_a_rolling_shutter_is_said_beside_the_bending(tmp_path):
     """Markers on other rows are seen at other times under a rolling shutter: the track says by how much."""
-    from servoscope.markers import TrackerSettings, track_video
+    from servoscope.pipeline import TrackerSettings, track_video
     from servoscope.simulate import simulate_campaign
 
     simulate_campaign(tmp_path, "quick", 0, codec="raw", width=320, height=256, fps=50, exposure_s=0.02,

@@ -14,7 +14,7 @@ from servoscope.campaign import cache as cache_module
 from servoscope.campaign import load_campaign, parallel, track_campaign
 from servoscope.campaign.cache import TrackCache, file_digest, tracks_equal
 from servoscope.campaign.runner import _settings
-from servoscope.markers.tracker import Track
+from servoscope.markers.track import Track
 
 
 def _synthetic_track(n: int = 7) -> Track:
@@ -51,7 +51,7 @@ def test_round_trip_gives_equal_tracks(quick_result, tmp_path):
         back = cache.load(f"k{label}")
         assert back is not None
         assert tracks_equal(back, track), label
-        assert type(back.reason) is list and type(back.warnings) is list
+        assert type(back.reason) is list and type(back.warnings) is tuple
     # The comparison itself is not vacuous.
     changed = dataclasses.replace(tracks["synthetic"], time_s=tracks["synthetic"].time_s.copy())
     changed.time_s[4] = np.nextafter(changed.time_s[4], 1.0)
@@ -60,7 +60,7 @@ def test_round_trip_gives_equal_tracks(quick_result, tmp_path):
 
 
 def test_fields_added_to_track_round_trip(tmp_path, monkeypatch):
-    @dataclass
+    @dataclass(frozen=True)  # Track is frozen: so is a class derived from it
     class TrackPlus(Track):  # what another engineer adding fields to Track would make
         spare_sigma_px: np.ndarray | None = None
         note: str = ""

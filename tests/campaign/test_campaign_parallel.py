@@ -65,7 +65,7 @@ def test_bad_worker_options_are_refused(quick_campaign):
 
 
 def test_a_retired_backend_is_refused_before_a_cluster_starts(tmp_path, monkeypatch):
-    from servoscope.markers.tracker import TrackerSettings
+    from servoscope.markers.settings import TrackerSettings
 
     def no_cluster(*args, **kwargs):
         raise AssertionError("a cluster was started for settings no worker can track with")

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.simulate import Scene
 from servoscope.simulate.clips import render_clip
 

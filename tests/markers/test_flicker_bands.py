@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import servoscope.markers.yuv_engine as yuv_engine
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.illumination import GAIN_DEADBAND, BandGain, GlobalGain
 from servoscope.simulate import simulate_campaign
 from servoscope.simulate.scene import marker_angle_rad

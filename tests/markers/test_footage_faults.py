@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.simulate import Scene
 from servoscope.simulate.clips import Occluder, render_clip
 

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers import kernels as K
 from servoscope.markers import kernel_numpy
 from servoscope.simulate import Scene
@@ -150,7 +150,7 @@ def test_streaming_reader_matches_planes(small_clip):
 
 def test_bad_engine_names():
     from servoscope.errors import ServoscopeError
-    from servoscope.markers.tracker import resolve_engine
+    from servoscope.markers.settings import resolve_engine
 
     assert resolve_engine(TrackerSettings()) == "numba"
     assert resolve_engine(TrackerSettings(centroid="projected")) == "reference-rgb"
@@ -164,7 +164,7 @@ def test_cpu_backend_is_a_deprecated_alias_of_auto():
     """backend="cpu" did what "auto" does: it warns and reads as "auto" (the same track and cache key)."""
     from servoscope.campaign.cache import settings_fingerprint
     from servoscope.errors import ServoscopeError
-    from servoscope.markers.tracker import BACKENDS, resolve_engine
+    from servoscope.markers.settings import BACKENDS, resolve_engine
 
     assert BACKENDS == ("auto",)
     with pytest.warns(DeprecationWarning, match='backend="auto"'):

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from servoscope.cli import main
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.led_level import disk_level, stays_down
 from servoscope.markers.led_search import switch_of
 from servoscope.simulate import simulate_campaign

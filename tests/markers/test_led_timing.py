@@ -102,7 +102,7 @@ def _overexposed_copy(src, dst, gain: float) -> None:
 def test_a_clipped_led_widens_t0_to_its_exposure(tmp_path):
     """An LED at the video's white level reads fully lit for part of the exposure it was dark:
     the partly lit frame's level, and t0 within it, are not known. Said, and in t0's σ."""
-    from servoscope.markers import track_video
+    from servoscope.pipeline import track_video
     from servoscope.simulate import Scene
     from servoscope.simulate.clips import render_clip
 

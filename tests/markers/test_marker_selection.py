@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.illumination import GlobalGain
 from servoscope.markers.selection import parse_marker_spec
 from servoscope.simulate import Scene

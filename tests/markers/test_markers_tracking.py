@@ -21,10 +21,10 @@ from servoscope.markers import (
     angle_error_analysis,
     frame_timing,
     plot_angle_error,
-    track_video,
     weighted_moments,
     worst_case_angle_error_rad,
 )
+from servoscope.pipeline import track_video
 from servoscope.simulate import Scene, polygon_coverage
 from servoscope.simulate.clips import Occluder, render_clip
 
@@ -71,7 +71,7 @@ def test_distortion_centroid_offset_against_exact_coverage(centre):
     recorded region's, ``sqrt(area / π)``, as the tracker gives it.
     """
     from servoscope.camera import CameraModel
-    from servoscope.markers.centroid import distortion_centroid_offset
+    from servoscope.camera.undistort import distortion_centroid_offset
 
     cam = CameraModel((720, 576), np.array([[1100.0, 0, 362.7], [0, 1100.0, 285.4], [0, 0, 1]]),
                       np.array([-0.08, 0.02, 0.0004, -0.0003, 0.0]))

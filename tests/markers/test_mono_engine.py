@@ -26,7 +26,7 @@ import warnings
 import numpy as np
 import pytest
 
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.settings import resolve_engine
 from servoscope.simulate import simulate_campaign
 from servoscope.video.native import iter_native_frames

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import servoscope.markers.mono_engine as mono_engine
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.illumination import NativeGain
 from servoscope.simulate import simulate_campaign
 from servoscope.video.native import iter_native_frames

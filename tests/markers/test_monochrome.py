@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.simulate import simulate_campaign
 
 # run_cli: the command's entry point in this process, as a child ran it (no interpreter to start a call).

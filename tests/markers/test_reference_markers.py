@@ -18,7 +18,7 @@ import pytest
 
 from servoscope.defaults import REFERENCE_COLOURS
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.markers.led_timing import led_switch_time
 from servoscope.simulate import simulate_campaign
 from servoscope.simulate.campaign import reference_stickers

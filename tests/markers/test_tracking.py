@@ -6,9 +6,10 @@ import math
 import numpy as np
 import pytest
 
+from servoscope.angle import angle_rad_from_centroids
 from servoscope.campaign import load_campaign
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, angle_rad_from_centroids, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 
 
 def _truth(manifest):

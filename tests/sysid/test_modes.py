@@ -63,8 +63,8 @@ def test_a_ring_down_beside_a_forced_sine_and_pooling():
 
 def test_the_rigid_quick_campaign_at_full_size_rings_nothing(quick_result):
     # 720×576, seed 3: its step's heave once gave a "mode" at 13.4 Hz with damping ratio 0.88.
-    assert quick_result.modes == []
-    assert quick_result.heave_response == []
+    assert quick_result.modes == ()
+    assert quick_result.heave_response == ()
 
 
 @pytest.mark.parametrize("codec", ["raw", "h264"])
@@ -138,8 +138,8 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
     # A rigid blade rings nothing.
     rigid = identify(simulate_campaign(tmp_path / "rigid", "quick", 0, width=480, height=384, codec="raw",
                                        step_after_t0_s=1.5), workers=1)
-    assert rigid.modes == [] and "modes" not in rigid.summary()
-    assert rigid.heave_response == [] and "heave_response" not in rigid.summary()
+    assert rigid.modes == () and "modes" not in rigid.summary()
+    assert rigid.heave_response == () and "heave_response" not in rigid.summary()
 
 
 def test_a_mode_shape_across_markers():

@@ -75,10 +75,10 @@ def test_a_bound_holds_and_says_when_it_is_reached():
 
 
 @pytest.mark.parametrize("fix, bounds, expected", [
-    ({"zeta": 0.8}, {}, "'zeta' is not a parameter of this model"),
-    ({"damping_ratio": 0.8}, {"damping_ratio": (0.5, 1.0)}, "both fixed and bounded"),
+    ({"zeta": 0.8}, {}, r"model of order \(0, 2\) has no parameter 'zeta'"),
+    ({"damping_ratio": 0.8}, {"damping_ratio": (0.9, 1.0)}, "fixed at 0.8, outside its bounds"),
     ({"natural_frequency_rad_s": -3.0}, {}, "must be > 0"),
-    ({}, {"natural_frequency_rad_s": (80.0, 20.0)}, "in order"),
+    ({}, {"natural_frequency_rad_s": (80.0, 20.0)}, "lower limit 80.0 must be below the upper 20.0"),
 ])
 def test_bad_holds_are_one_clear_error(fix, bounds, expected):
     with pytest.raises(ServoscopeError, match=expected):
@@ -106,6 +106,6 @@ def test_campaign_manifest_and_command_line_hold_parameters(quick_campaign, tmp_
     assert "(held fixed)" in (out / "report.html").read_text()
     # A name the model does not have: one line, exit 2, before anything is tracked or written.
     bad = run_cli("identify", str(manifest), "--out", str(tmp_path / "o2"), "--fix", "zeta=0.8")
-    assert bad.returncode == 2 and "'zeta' is not a parameter" in bad.stderr and not (tmp_path / "o2").exists()
+    assert bad.returncode == 2 and "has no parameter 'zeta'" in bad.stderr and not (tmp_path / "o2").exists()
     assert len(bad.stderr.strip().splitlines()) == 1
     assert math.isfinite(result["model"]["params"]["gain"])

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from servoscope.errors import ServoscopeError
-from servoscope.markers import TrackerSettings, track_video
+from servoscope.pipeline import TrackerSettings, track_video
 from servoscope.video import probe_video
 from support import DATA
 

@@ -10,8 +10,8 @@ import pytest
 from servoscope.campaign import load_campaign
 from servoscope.errors import ServoscopeError
 from servoscope.video import iter_frames, probe_video
-from servoscope.video import overlay
-from servoscope.video.overlay import annotate_frame, write_overlay
+from servoscope.pipeline import overlay
+from servoscope.pipeline.overlay import annotate_frame, write_overlay
 
 
 def _reddish(img: np.ndarray) -> np.ndarray:

@@ -46,6 +46,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..camera.plane_fit import apply_homography, homography_jacobian
+from ..parameters import interval95
 
 __all__ = ["ObliqueView", "OBLIQUE_MIN_FRAMES", "SLOW_PX", "oblique_view"]
 
@@ -279,15 +280,18 @@ def _intervals(theta: np.ndarray, cov: np.ndarray, lead_n: np.ndarray, trail_n: 
     angles = np.degrees(np.arccos(np.clip(sv[:, 1] / sv[:, 0], 0.0, 1.0)))
     a_lo, a_hi = (float(v) for v in np.percentile(angles[1:], [2.5, 97.5]))
     a0 = float(angles[0])
-    a_lo = a0 - math.hypot(a0 - a_lo, 1.96 * small * VIEW_SYSTEMATIC_DEG)
-    a_hi = a0 + math.hypot(a_hi - a0, 1.96 * small * VIEW_SYSTEMATIC_DEG)
+    # A systematic error σ widens each half width by its own 95 % half width (the normal interval's).
+    a_sys = interval95(0.0, small * VIEW_SYSTEMATIC_DEG, "normal")[1]
+    a_lo = a0 - math.hypot(a0 - a_lo, a_sys)
+    a_hi = a0 + math.hypot(a_hi - a0, a_sys)
     if a_lo <= 0.0 or _square_on_within_95(theta[:4], cov[:4, :4]):
         a_lo = 0.0  # the angle is a magnitude: its draws never reach 0, but a square-on view is not excluded
     g_lo, g_hi = (float(v) for v in np.percentile(gains[1:], [2.5, 97.5]))
     g0 = float(gains[0])
     sys_gain = small * GAIN_SYSTEMATIC + GAIN_SYSTEMATIC_FRACTION * abs(g0 - 1.0)
-    g_lo = g0 - math.hypot(g0 - g_lo, 1.96 * sys_gain)
-    g_hi = g0 + math.hypot(g_hi - g0, 1.96 * sys_gain)
+    g_sys = interval95(0.0, sys_gain, "normal")[1]
+    g_lo = g0 - math.hypot(g0 - g_lo, g_sys)
+    g_hi = g0 + math.hypot(g_hi - g0, g_sys)
     return (a0, a_lo, a_hi), (g0, g_lo, g_hi), jmid
 
 

@@ -42,17 +42,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING, Any, Iterable
 
 import numpy as np
+
+from ..parameters import FitResult, Parameter, Parameters, interval95
 
 if TYPE_CHECKING:  # the camera stage reads a track; it never calls the markers stage
     from ..markers.track import Track
 
 __all__ = ["BLUR_BLOCK_FRAMES", "BLUR_MIN_Z", "BLUR_SYSTEMATIC", "BlurEvidence", "ExposureEstimate", "blur_evidence",
            "estimate_exposure", "pool_blur"]
-
-_Z95 = 1.959963984540054
 
 #: Frames per block of the blur regression's cluster-robust uncertainty: longer than the
 #: tracking errors' correlation (a few frames; a codec's GOP), short enough for many blocks.
@@ -69,8 +69,16 @@ BLUR_SYSTEMATIC = 0.10
 
 
 @dataclass(frozen=True)
-class ExposureEstimate:
+class ExposureEstimate(FitResult):
     """The exposure of a campaign's camera and where it came from.
+
+    A :class:`~servoscope.parameters.FitResult`: :attr:`parameters` holds ``exposure_s`` with
+    `stderr_s` and `ci95_s` as they are (``fit_report()``, ``to_pandas()`` and the notebook's
+    table show them). Its interval: held at the given value ("given"); the LED's Wilson score
+    interval of the share of switches that lit a frame partly, times the frame interval
+    (interval kind ``"wilson"``: given, not made from the error); from blur, or both combined,
+    normal from the error, stopped at 0 (kind ``"normal"``, ``min`` 0; a blur seen has a
+    relative error of at most 16 %, so the stop is only a guard).
 
     Attributes
     ----------
@@ -106,6 +114,33 @@ class ExposureEstimate:
     @property
     def known(self) -> bool:
         return self.value_s is not None
+
+    @property
+    def model_name(self) -> str:  # type: ignore[override]
+        return f"camera exposure (source: {self.source})"
+
+    @property
+    def parameters(self) -> Parameters:
+        """``exposure_s`` (s) with its error and interval as held (NaN when unknown; fixed when given)."""
+        nan = math.nan
+        if self.value_s is None:
+            return Parameters([Parameter("exposure_s", nan, nan, (nan, nan), min=0.0, unit="s")])
+        se = nan if self.stderr_s is None else float(self.stderr_s)
+        ci = (nan, nan) if self.ci95_s is None else (float(self.ci95_s[0]), float(self.ci95_s[1]))
+        kind = "wilson" if self.source == "LED" else "normal"
+        return Parameters([Parameter("exposure_s", float(self.value_s), se, ci, vary=self.source != "given", min=0.0,
+                                     unit="s", interval=kind)])
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """The evidence: source, frame interval, LED switches (and those partly lit), the blur's."""
+        out: dict[str, Any] = {"source": self.source, "frame_interval_s": self.frame_interval_s,
+                               "led_switches": self.switches, "led_switches_partly_lit": self.partly_lit}
+        if self.blur is not None:
+            out.update({"blur seen": self.blur.seen, "blur z": float(self.blur.z)})
+            if not self.blur.seen and self.blur.upper_bound_s is not None:
+                out["blur upper_bound_s"] = float(self.blur.upper_bound_s)
+        out["evidence"] = self.detail
+        return out
 
     @classmethod
     def from_summary(cls, data: dict) -> "ExposureEstimate":
@@ -183,7 +218,7 @@ class BlurEvidence:
         if self.frame_interval_s is None or not self.z >= BLUR_MIN_Z:
             return False
         e = self._raw_exposure_s
-        return e - _Z95 * self._stderr(e) > self.frame_interval_s
+        return self._interval(e)[0] > self.frame_interval_s
 
     @property
     def seen(self) -> bool:
@@ -193,6 +228,12 @@ class BlurEvidence:
     def _stderr(self, e: float) -> float:
         # The delta method (σ_e = 6·σ_k / e) and the systematic part, in quadrature.
         return math.hypot(6.0 * self.slope_stderr_s2 / e, BLUR_SYSTEMATIC * e)
+
+    def _interval(self, e: float) -> tuple[float, float]:
+        # Normal, stopped at 0 (a guard: where blur is seen the relative error is at most
+        # hypot(1/(2·BLUR_MIN_Z), BLUR_SYSTEMATIC) = 16 %, and the normal interval stays above 0).
+        lo, hi = interval95(e, self._stderr(e), "normal")
+        return max(lo, 0.0), hi
 
     @property
     def exposure_s(self) -> float | None:
@@ -209,17 +250,16 @@ class BlurEvidence:
     def ci95_s(self) -> tuple[float, float] | None:
         """95 % interval of e (s), when blur is seen."""
         e = self.exposure_s
-        if e is None:
-            return None
-        se = self._stderr(e)
-        return max(e - _Z95 * se, 0.0), e + _Z95 * se
+        return None if e is None else self._interval(e)
 
     @property
     def upper_bound_s(self) -> float | None:
         """The longest exposure the footage allows (95 %, s); None without evidence."""
         if not (self.blocks >= 3 and math.isfinite(self.slope_s2) and self.slope_stderr_s2 > 0):
             return None
-        return math.sqrt(12.0 * (max(self.slope_s2, 0.0) + _Z95 * self.slope_stderr_s2)) * (1 + _Z95 * BLUR_SYSTEMATIC)
+        # The slope's upper 95 % limit, then the systematic part's (a relative error: on a scale of 1).
+        k_high = interval95(max(self.slope_s2, 0.0), self.slope_stderr_s2, "normal")[1]
+        return math.sqrt(12.0 * k_high) * interval95(1.0, BLUR_SYSTEMATIC, "normal")[1]
 
     def summary(self) -> dict:
         """Plain types, for result.json and the track summary."""
@@ -387,9 +427,12 @@ def pool_blur(evidence: Iterable[BlurEvidence]) -> BlurEvidence | None:
 def _wilson(k: int, n: int) -> tuple[float, float]:
     """The Wilson score 95 % interval of a binomial proportion k/n."""
     p = k / n
-    z2 = _Z95**2
+    # A score interval, not a parameter's: it needs the normal 97.5 % point itself, taken from
+    # the one function that makes intervals (the upper limit of 0 ± 1 standard error).
+    z = interval95(0.0, 1.0, "normal")[1]
+    z2 = z**2
     centre = (p + z2 / (2 * n)) / (1 + z2 / n)
-    half = _Z95 * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
+    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
@@ -447,7 +490,8 @@ def estimate_exposure(switches: Iterable[tuple[int, float]], given_s: float | No
     w_led, w_blur = 1.0 / se**2, 1.0 / b_se**2
     mean = (w_led * value + w_blur * b_value) / (w_led + w_blur)
     both_se = 1.0 / math.sqrt(w_led + w_blur)
-    return ExposureEstimate(mean, both_se, (max(mean - _Z95 * both_se, 0.0), mean + _Z95 * both_se), "LED+blur",
+    lo, hi = interval95(mean, both_se, "normal")
+    return ExposureEstimate(mean, both_se, (max(lo, 0.0), hi), "LED+blur",
                             f"{detail}; {blur.describe()}", period, n, partly, blur)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..angle.pivot import heave_px, pivot_motion
 from ..markers.track import marker_names
-from ..markers.tracker import Track
+from ..markers.track import Track
 from ..sysid import SineFit
 from ..sysid.heave import HeaveModel, HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px
 from ..sysid.modes import ModeFit, fit_damped_modes, fit_mode_shapes, pool_modes

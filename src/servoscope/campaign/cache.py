@@ -7,7 +7,7 @@ fitting is cheap. A track is therefore kept on disk under a key made of
   1 MiB chunks: about 1 GB/s, so ~3 ms for a 3 MB dwell — see
   docs/performance.md), so a renamed or copied video still hits and a
   re-recorded one with the same name misses;
-* every field of the :class:`~servoscope.markers.tracker.TrackerSettings`
+* every field of the :class:`~servoscope.markers.settings.TrackerSettings`
   (marker colours, camera matrix and distortion, exposure, …);
 * :data:`CACHE_FORMAT_VERSION`, the servoscope version, a digest of the
   tracking code's own source files and the versions of the libraries whose
@@ -40,7 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from ..markers.tracker import Track, TrackerSettings
+from ..markers.settings import TrackerSettings
+from ..markers.track import Track
 from .._io import write_bytes_atomic
 
 __all__ = ["CACHE_FORMAT_VERSION", "TrackCache", "file_digest", "settings_fingerprint", "tracks_equal"]

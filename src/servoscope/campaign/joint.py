@@ -14,9 +14,10 @@ import math
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..markers.tracker import Track
-from ..sysid.servo_fit import check_servo_held, expression_names, fit_percent
-from ..sysid.servo_select import ServoModelSelection, check_held_names, select_servo_model
+from ..markers.track import Track
+from ..parameters import check_held, tie_names
+from ..sysid.servo_fit import check_servo_held, fit_percent
+from ..sysid.servo_select import ServoModelSelection, select_servo_model
 from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 from .manifest import Campaign
 from .result import input_start
@@ -68,11 +69,12 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
                                   f"{next(s for s, p in NONLINEAR_PARAMETER.items() if p == own[0])} (or auto)")
         return
     tried = structures_of(nonlinear)
-    check_held_names(tried, fix, bounds, ties, f"--nonlinear {nonlinear}")
+    check_held({*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in tried if s in NONLINEAR_PARAMETER)},
+               fix, bounds, ties, who=f"--nonlinear {nonlinear}")
     for s in tried:
         mine = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(s)}
         check_servo_held(s, {k: v for k, v in fix.items() if k in mine}, {k: v for k, v in bounds.items() if k in mine},
-                         {k: v for k, v in ties.items() if k in mine and expression_names(v) <= mine})
+                         {k: v for k, v in ties.items() if k in mine and tie_names(v) <= mine})
     if isinstance(order, str) or tuple(order) != (0, 2):
         raise ServoscopeError(f"--nonlinear {nonlinear}: the time-domain models are 2nd-order with a dead time; "
                               f"use --order 2 (not {order})")

@@ -31,7 +31,9 @@ from pathlib import Path
 from typing import Callable, Iterator, Protocol, Sequence
 
 from ..errors import ServoscopeError
-from ..markers.tracker import Track, TrackerSettings, resolve_engine, track_video
+from ..markers.settings import TrackerSettings, resolve_engine
+from ..markers.track import Track
+from ..pipeline.tracker import track_video
 from ..video.reader import THREADS_ENV
 from .cache import TrackCache
 
@@ -207,7 +209,7 @@ def _track_on_dask(pending, settings, n_workers: int | None, scheduler: str | No
         for rank, (i, test, key) in enumerate(order):
             # track_video itself is the task, not a wrapper defined here: a
             # worker unpickles a task by importing its module, and
-            # servoscope.markers imports in 0.3 s where this package (via
+            # servoscope.pipeline imports in 0.3 s where this package (via
             # servoscope.campaign: SciPy, python-control) takes ~1.8 s.
             future = client.submit(
                 track_video, str(test.video), settings,

@@ -1,7 +1,7 @@
 """The camera's view of the blade's plane over a campaign: the check, the warning, the correction.
 
 Without a plane (``[camera] plane``), the stickers' shapes and sizes over every sharp frame of every
-test tell how far off square the camera looks (:mod:`servoscope.markers.plane_view`): above
+test tell how far off square the camera looks (:mod:`servoscope.pipeline.plane_view`): above
 :data:`~servoscope.defaults.OBLIQUE_VIEW_WARNING_DEG` ``identify`` warns with the gain error
 it implies. ``identify(self_calibrate_plane=True)`` maps every track by the estimated
 correction instead (foreshortening and perspective, resting on round or square stickers of one size).
@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from ..angle.view import ObliqueView
 from ..errors import ServoscopeError
-from ..markers.plane_view import SELF_CALIBRATED, pooled_view, told_view, view_warning, with_view_correction
+from ..parameters import stderr_of_interval
+from ..pipeline.plane_view import SELF_CALIBRATED, pooled_view, told_view, view_warning, with_view_correction
 from ..markers.track import Track
 from .manifest import Campaign
 
@@ -60,7 +61,7 @@ def campaign_in_view(campaign: Campaign, tracks: dict[str, Track], self_calibrat
     view = told_view(view, campaign.path)
     corrected = {label: with_view_correction(t, view) for label, t in tracks.items()}
     lo, hi = view.angle_gain_ci95
-    rel = (hi - lo) / (2.0 * 1.96) / view.angle_gain
+    rel = stderr_of_interval(lo, hi) / view.angle_gain
     warnings.insert(0, f"angles corrected for the camera's view as the stickers tell it: {view.describe()}; the "
                        "correction rests on round or square stickers of one size (a board photo, servoscope plane, "
                        "rests on nothing about them)")

@@ -8,9 +8,10 @@ hold, save and look at a result without the stage that produced it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
@@ -109,15 +110,18 @@ def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
 
 
 
-@dataclass
+@dataclass(frozen=True)
 class IdentificationResult:
     """Everything one identification produced.
+
+    Frozen: a changed result is a new one (:func:`dataclasses.replace`). Its lists are
+    kept as tuples and its dicts of tracks and fits as read-only mappings.
 
     Attributes
     ----------
     campaign : Campaign
-    tracks : dict of label → Track
-    sine_fits : dict of label → SineFit
+    tracks : read-only mapping of label → Track
+    sine_fits : read-only mapping of label → SineFit
     frequency_response : FrequencyResponse
     model : TransferFunctionFit
         The fitted model: the order asked ((0, 2) by default, the paper's eq. 6), fitted to
@@ -127,16 +131,16 @@ class IdentificationResult:
     step : StepAnalysis or None
         The step test, with the dead time fitted against the model.
     step_label : str or None
-    warnings : list of str
+    warnings : tuple of str
     exposure : ExposureEstimate or None
         The camera's exposure: given, or estimated from the LED's switches.
     shared_t0_stderr_s : float
         The part of the dwells' t0 uncertainty they may share (see
         :func:`shared_t0_stderr`), added to the phase dead time's.
-    modes : list of ModeFit
+    modes : tuple of ModeFit
         The blade's structural modes seen in its heave after the step (see
         :func:`servoscope.campaign.blade.blade_modes`); empty when none rings.
-    amplitude_checks : list of AmplitudeCheck
+    amplitude_checks : tuple of AmplitudeCheck
         Each frequency measured at several input amplitudes, its gains compared
         (:func:`~servoscope.sysid.gain_against_amplitude`); empty otherwise.
     servo_model : ServoModelSelection or None
@@ -144,10 +148,10 @@ class IdentificationResult:
         :mod:`servoscope.campaign.joint`); None without.
     predicted_step_fit_percent : float or None
         The step's fit by the frequency-domain model, fitted without it (2nd order only).
-    heave_response : list of HeaveRow
+    heave_response : tuple of HeaveRow
         Each dwell's heave at its input frequency (:func:`servoscope.campaign.blade.heave_response`);
         empty when no dwell shows any (a rigid blade).
-    bending_response : list of HeaveRow
+    bending_response : tuple of HeaveRow
         Each extra marker's bending at each dwell's input frequency
         (:func:`servoscope.campaign.blade.bending_response`); empty with two markers.
     heave_model : HeaveModel or None
@@ -155,7 +159,7 @@ class IdentificationResult:
         :func:`servoscope.campaign.blade.heave_model`); its mode is also in ``modes``.
     view : ObliqueView or None
         The camera's view of the blade's plane as the markers' separation tells it
-        (:func:`servoscope.markers.plane_view.pooled_view`): of the image's positions
+        (:func:`servoscope.pipeline.plane_view.pooled_view`): of the image's positions
         without a plane, of the plane's with one (a check of the plane); None with too
         few frames.
     plane : dict or None
@@ -165,24 +169,31 @@ class IdentificationResult:
     """
 
     campaign: Campaign
-    tracks: dict[str, Track]
-    sine_fits: dict[str, SineFit]
+    tracks: Mapping[str, Track]
+    sine_fits: Mapping[str, SineFit]
     frequency_response: FrequencyResponse
     model: TransferFunctionFit
     step: StepAnalysis | None = None
     step_label: str | None = None
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
     exposure: ExposureEstimate | None = None
     shared_t0_stderr_s: float = 0.0
-    amplitude_checks: list[AmplitudeCheck] = field(default_factory=list)
-    modes: list[ModeFit] = field(default_factory=list)
+    amplitude_checks: tuple[AmplitudeCheck, ...] = ()
+    modes: tuple[ModeFit, ...] = ()
     servo_model: ServoModelSelection | None = None
     predicted_step_fit_percent: float | None = None
-    heave_response: list = field(default_factory=list)
-    bending_response: list = field(default_factory=list)
+    heave_response: tuple[HeaveRow, ...] = ()
+    bending_response: tuple[HeaveRow, ...] = ()
     heave_model: HeaveModel | None = None
     view: ObliqueView | None = None
     plane: dict | None = None
+
+    def __post_init__(self) -> None:
+        # Lists given (the runner's, a notebook's) kept as tuples, dicts as read-only views of a copy.
+        for name in ("warnings", "amplitude_checks", "modes", "heave_response", "bending_response"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        for name in ("tracks", "sine_fits"):
+            object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
 
     @property
     def transfer_function(self):
@@ -422,16 +433,17 @@ class IdentificationResult:
             if not csv.exists():
                 raise ServoscopeError(f"{csv}: missing; a result is read with its tracks/ folder beside result.json")
             track = Track.from_csv(csv, video=entry["video"])
-            track.t0_s, track.t0_uncertainty_s = entry.get("t0_s"), entry.get("t0_uncertainty_s")
-            track.warnings = [w for w in entry.get("warnings", [])]
+            sf = entry.get("sine_fit")
+            fit_warnings = [] if sf is None else sf.get("warnings", [])  # the test's warnings hold its fit's too
+            more = {}
             if track.extra_xy_px is not None and data.get("extra_markers"):
-                track.extra_colours = tuple(data["extra_markers"])  # the table holds their columns, not colours
+                more["extra_colours"] = tuple(data["extra_markers"])  # the table holds their columns, not colours
+            track = replace(track, t0_s=entry.get("t0_s"), t0_uncertainty_s=entry.get("t0_uncertainty_s"),
+                            warnings=tuple(w for w in entry.get("warnings", []) if w not in fit_warnings), **more)
             tracks[label] = track
             tests.append(TestSpec(video=Path(entry["video"]), kind=entry["kind"], amplitude=entry["amplitude"],
                                   frequency_hz=entry.get("frequency_hz"), label=label))
-            if entry.get("sine_fit") is not None:
-                sf = entry["sine_fit"]
-                track.warnings = [w for w in track.warnings if w not in sf.get("warnings", [])]
+            if sf is not None:
                 lo, hi = sf["window_s"]
                 inside = track.valid & (track.angle_time_s >= lo) & (track.angle_time_s <= hi)
                 fits[label] = SineFit.from_summary(sf, time_s=track.angle_time_s[inside], y=track.angle_rad[inside])
@@ -462,14 +474,16 @@ class IdentificationResult:
         td = data["model"].get("time_domain")
         selection = None if td is None else ServoModelSelection.from_summary(td)
         predicted = None if data.get("step") is None else data["step"].get("predicted_fit_percent")
-        return cls(campaign, tracks, fits, fr, model, step, None if step is None else data["step"]["label"],
-                   list(data.get("warnings", [])), exposure, float(shared), checks, modes, selection,
-                   predicted if selection is None else None,
-                   [HeaveRow.from_summary(r) for r in data.get("heave_response", [])],
-                   [HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
-                   None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]),
-                   None if data.get("view") is None else ObliqueView.from_summary(data["view"]),
-                   data.get("plane"))
+        return cls(
+            campaign=campaign, tracks=tracks, sine_fits=fits, frequency_response=fr, model=model, step=step,
+            step_label=None if step is None else data["step"]["label"], warnings=tuple(data.get("warnings", [])),
+            exposure=exposure, shared_t0_stderr_s=float(shared), amplitude_checks=checks, modes=modes,
+            servo_model=selection, predicted_step_fit_percent=predicted if selection is None else None,
+            heave_response=[HeaveRow.from_summary(r) for r in data.get("heave_response", [])],
+            bending_response=[HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
+            heave_model=None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]),
+            view=None if data.get("view") is None else ObliqueView.from_summary(data["view"]),
+            plane=data.get("plane"))
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

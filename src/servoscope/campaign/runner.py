@@ -8,33 +8,24 @@ notebook or a test can look at any of them.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from ..angle.pivot import axis_moved
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
-from ..defaults import STEP_DISCERNIBLE_SIGMA
-from ..errors import ServoscopeError
-from ..markers.tracker import Track, TrackerSettings
-from ..sysid import (
-    FrequencyResponse,
-    SineFit,
-    analyse_step,
-    fit_sine,
-    fit_transfer_function,
-    gain_against_amplitude,
-    rigid_motion_null,
-    with_gain_scale_uncertainty,
-)
+from ..markers.settings import TrackerSettings
+from ..markers.track import Track
+from ..sysid import FrequencyResponse, SineFit, fit_transfer_function, with_gain_scale_uncertainty
 from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
                     step_ringdown_warning)
+from .dwells import amplitude_checks, dwell_response, fit_dwells, fit_mode
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
-from .result import IdentificationResult, dead_time_estimates, input_start, input_start_stderr
+from .result import IdentificationResult, dead_time_estimates
+from .step_test import step_test
 
 __all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
 
@@ -243,45 +234,6 @@ def shared_t0_stderr(tests: list[TestSpec], tracks: dict[str, Track]) -> tuple[f
     return shared, own
 
 
-def step_dead_time_model_stderr(model, run_step: Callable[[object], object]) -> float:
-    """How much the step's dead time moves with the model's own uncertainty (s).
-
-    The step's dead time is fitted against the model's step shape (its gain
-    free): a natural frequency or damping that is off by its standard error
-    makes the motion start earlier or later. Propagated by central
-    differences over (ωn, ζ) with their covariance; 0 for models of other
-    forms (their shape parameters are not the physical ones).
-    """
-    import control  # deferred: only here
-
-    names = list(model.param_names)
-    if not {"gain", "natural_frequency_rad_s", "damping_ratio"} <= set(names):
-        return 0.0
-    idx = [names.index("natural_frequency_rad_s"), names.index("damping_ratio")]
-    cov = np.asarray(model.covariance, dtype=float)[np.ix_(idx, idx)]
-    if not np.all(np.isfinite(cov)):
-        return 0.0
-    base = {k: float(model.params[k]) for k in ("gain", "natural_frequency_rad_s", "damping_ratio")}
-    grad = []
-    for i, name in enumerate(("natural_frequency_rad_s", "damping_ratio")):
-        h = math.sqrt(max(cov[i, i], 0.0))
-        if h <= 0:
-            grad.append(0.0)
-            continue
-        taus = []
-        for sign in (1.0, -1.0):
-            p = dict(base)
-            p[name] += sign * h
-            wn, zeta = p["natural_frequency_rad_s"], p["damping_ratio"]
-            result = run_step(control.tf([p["gain"] * wn**2], [1.0, 2.0 * zeta * wn, wn**2]))
-            taus.append(getattr(result, "dead_time_s", None))
-        if any(t is None or not math.isfinite(t) for t in taus):
-            return 0.0
-        grad.append((taus[0] - taus[1]) / (2.0 * h))
-    g = np.asarray(grad)
-    return float(math.sqrt(max(g @ cov @ g, 0.0)))
-
-
 def dead_time_disagreement(estimates: dict) -> str | None:
     """A warning when the phase and step dead times differ by more than their uncertainties allow (95 %)."""
     phase, step = estimates.get("phase"), estimates.get("step")
@@ -296,6 +248,120 @@ def dead_time_disagreement(estimates: dict) -> str | None:
             f"{abs(diff) / se:.1f} standard errors: the linear model or the "
             "input start of one of them is not what the footage shows (check the LED, the exposure and the "
             "step's fit)")
+
+
+class _Held(NamedTuple):
+    """The model parameters held at a value, within limits, or tied (the manifest's and the caller's)."""
+
+    fix: dict
+    bounds: dict
+    ties: dict
+
+
+def _held_parameters(campaign: Campaign, fix, bounds, ties) -> _Held:
+    """The manifest's ``[model]`` holds, overridden by the caller's."""
+    held_fix, held_bounds = campaign.held_parameters(fix, bounds)
+    return _Held(held_fix, held_bounds, {**campaign.model_ties, **(ties or {})})
+
+
+def _tracked(campaign: Campaign, keep_going: bool, progress: ProgressFn | None,
+             track_options: dict) -> tuple[Campaign, dict[str, Track]]:
+    """Track the campaign; the videos that failed (``keep_going``) left out of it."""
+    failures: dict[str, str] = {}
+    tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress, **track_options)
+    return (campaign.without(failures) if failures else campaign), tracks
+
+
+def _add_tracking_warnings(campaign: Campaign, tracks: dict[str, Track], warnings: list[str]) -> None:
+    """The LED's coverage (first: it decides what the phases and the dead time rest on) and the axis's motion."""
+    led_warning = led_coverage_warning(campaign, tracks)
+    if led_warning:
+        warnings.insert(0, led_warning)
+    moved = pivot_warning(campaign, tracks)
+    if moved:
+        warnings.append(moved)
+
+
+def _fit_model(fr: FrequencyResponse, order, mode: str, bootstrap: int, held: _Held, scale_error):
+    """The frequency-domain model, its gain's interval widened by the angle scale's uncertainty."""
+    fr_fix, fr_bounds, _, _ = split_held(held.fix, held.bounds)
+    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=fr_fix or None,
+                                  bounds=fr_bounds or None)
+    if scale_error is not None:
+        model = with_gain_scale_uncertainty(model, *scale_error)
+    return model
+
+
+def _time_domain_model(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit],
+                       fr: FrequencyResponse, fitted: dict, order, nonlinear: str, exposure_s: float,
+                       t0_stderr: tuple[float, dict[str, float]], held: _Held):
+    """The servo's time-domain models fitted to the whole traces (:func:`servo_model`)."""
+    shared_t0_s, own_t0_stderr = t0_stderr
+    t0_se = math.hypot(shared_t0_s, float(np.median(list(own_t0_stderr.values()) or [0.0])))
+    return servo_model(
+        campaign, tracks, {label: f.window_s for label, f in fits.items()},
+        {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
+        fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
+        nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held.fix, bounds=held.bounds,
+        ties=held.ties)
+
+
+class _BladeMotions(NamedTuple):
+    """The blade's motions beside its pitch: its modes, heave and bending per dwell, the flapping model."""
+
+    modes: list
+    heave: list
+    bending: list
+    flapping: object
+
+
+def _blade_motions(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], step, step_label,
+                   model, warnings: list[str]) -> _BladeMotions:
+    """The blade's modes (step and dwells), heave and bending; the pitch axis found once for them all."""
+    step_track = tracks[step_label] if step_label else None
+    pivot = axis_of(tracks, fits, step_track)
+    modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
+    modes += dwell_modes(campaign, tracks, fits, pivot, model, modes)
+    heave = heave_response(campaign, tracks, fits, pivot, modes)
+    bending = bending_response(campaign, tracks, fits, modes)
+    flapping = heave_model(campaign, heave, fits, modes)
+    modes += [m for m in flapping.modes if m.source == "heave_response"] if flapping is not None else []
+    short = step_ringdown_warning(step, step_track, model, step_label or "", modes)
+    if short:
+        warnings.append(short)
+    return _BladeMotions(modes, heave, bending, flapping)
+
+
+def mode_warnings(campaign: Campaign, modes) -> list[str]:
+    """A warning for each blade mode near a dwell's frequency (one per mode seen in both the step and the dwells)."""
+    out = []
+    warned: list[float] = []
+    for mode in modes:
+        if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
+            continue  # the same mode seen in the step and the dwells: one warning
+        warned.append(mode.frequency_hz)
+        near = [t.label for t in campaign.sine_tests if t.frequency_hz
+                and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
+        if near:
+            out.append(f"the blade's mode at {mode.frequency_hz:.3g} Hz (damping {mode.damping_ratio:.3f}) is "
+                       f"within its resonance of the dwell(s) {', '.join(near)}: the blade's own motion adds "
+                       "to the pitch there")
+    return out
+
+
+def dead_time_warnings(model, step, shared_t0_s: float, exposure: ExposureEstimate) -> list[str]:
+    """The dwells' possibly shared input-start error, and a disagreement of the phase and step dead times."""
+    out = []
+    if shared_t0_s > 0 and model.dead_time_s is not None:
+        out.append(
+            f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
+            f"(±{1e3 * shared_t0_s:.2f} ms) may be one shared error that no averaging removes: the phase dead time's "
+            f"interval includes it"
+            + ("" if exposure.known else f"; exposure {exposure.detail}"))
+    disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
+    if disagreement:
+        out.append(disagreement)
+    return out
 
 
 def identify(
@@ -348,7 +414,7 @@ def identify(
         ``[model] tie``), e.g. ``{"rate_limit_rad_s": "4*gain"}``.
     self_calibrate_plane : bool
         Without a plane (``[camera] plane``): correct every track for the camera's view as the
-        stickers tell it (:func:`~servoscope.markers.plane_view.with_view_correction`:
+        stickers tell it (:func:`~servoscope.pipeline.plane_view.with_view_correction`:
         foreshortening and perspective, from round or square stickers of one size), the gain's
         interval widened by the estimate's uncertainty. Refused where the footage does not tell
         the view.
@@ -365,101 +431,27 @@ def identify(
     ------
     ServoscopeError
         When the manifest or a video is bad, or too few dwells could be fitted.
-
-    Long because it is the pipeline's order written out (exposure, input starts, dwells,
-    frequency response, model, step, warnings), each step a call to its stage.
     """
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
     if not isinstance(order, str):
         order = tuple(order)  # (0, 2) or [0, 2] alike
-    held_fix, held_bounds = campaign.held_parameters(fix, bounds)
-    held_ties = {**campaign.model_ties, **(ties or {})}
-    check_nonlinear(campaign, nonlinear, order, held_fix, held_bounds, held_ties)
+    held = _held_parameters(campaign, fix, bounds, ties)
+    check_nonlinear(campaign, nonlinear, order, held.fix, held.bounds, held.ties)
     if tracks is None:
-        failures: dict[str, str] = {}
-        tracks = track_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress, **track_options)
-        if failures:
-            campaign = campaign.without(failures)
+        campaign, tracks = _tracked(campaign, keep_going, progress, track_options)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
     tracks, view, scale_error = campaign_in_view(campaign, tracks, self_calibrate_plane, warnings)
     exposure = campaign_exposure(campaign, tracks)
     shared_t0_s, own_t0_stderr = shared_t0_stderr(campaign.sine_tests, tracks)
-    led_warning = led_coverage_warning(campaign, tracks)
-    if led_warning:
-        warnings.insert(0, led_warning)  # first: it decides what the phases and the dead time rest on
-    moved = pivot_warning(campaign, tracks)
-    if moved:
-        warnings.append(moved)
-    fits: dict[str, SineFit] = {}
-    amplitudes = []
-    for test in campaign.sine_tests:
-        track = tracks[test.label]
-        t0 = input_start(test, track)
-        if t0 is None:
-            warnings.append(f"{test.label}: no input start (LED or t0_s): phase unknown, steady state taken from the first frame")
-        if track.n_valid < 5:
-            warnings.append(f"{test.label}: only {track.n_valid} valid frames; dwell left out")
-            continue
-        try:
-            sine_fit = fit_sine(
-                # When each angle was sampled (a rolling shutter's rows lag the frame time).
-                track.angle_time_s,
-                track.angle_rad,
-                test.frequency_hz,
-                t0_s=t0,
-                # Each dwell's whole t0 error; the part they may share is added to the dead time (below).
-                t0_stderr_s=own_t0_stderr.get(test.label, input_start_stderr(test, track)),
-                settle_s=campaign.settle_s,
-                valid=track.valid,
-                # Harmonics the two markers do not share are tracking
-                # artefacts, not distortion (sysid.sine.rigid_motion_null).
-                null_channel=rigid_motion_null(track.lead_xy_px, track.trail_xy_px, track.valid),
-                # The codec check: I-frames show the motion without the codec's prediction.
-                intra=track.intra,
-            )
-        except ServoscopeError as exc:
-            warnings.append(f"{test.label}: dwell left out: {exc}")
-            continue
-        fits[test.label] = sine_fit
-        amplitudes.append(test.amplitude)
-    if len(fits) < 3:
-        asked = "its order chosen from the data" if order == "auto" else f"order (nb, na) = {order}"
-        raise ServoscopeError(
-            f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; identify fits a model ({asked}) "
-            "to 3 or more, whatever its order"
-        )
-    fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
-    if campaign.exposure_s is not None:
-        fr = fr.corrected_for_exposure(campaign.exposure_s)
-    elif exposure.known and "blur" in exposure.source:
-        # Seen in the blur: a long shutter (a full frame at 100 frames/s takes 3.7 % off a 12 Hz
-        # dwell), corrected with its uncertainty. Not the LED's estimate alone: the LED
-        # says most when the shutter is short, where the correction is a few per mille.
-        fr = fr.corrected_for_exposure(exposure.value_s, exposure.stderr_s)
-    if fit not in ("auto", "magnitude", "complex"):
-        raise ServoscopeError(f"fit: unknown mode {fit!r} (use auto, magnitude or complex)")
-    phases_known = bool(np.all(np.isfinite(fr.phase_deg)))
-    if fit == "complex" and not phases_known:
-        raise ServoscopeError(
-            f"{campaign.path}: a complex fit needs every dwell's input start (an LED or t0_s); use --fit magnitude"
-        )
-    # Amplitude as a test axis: one frequency's dwells at several amplitudes must agree if the servo is linear.
-    # (The response is sorted by frequency: each dwell's amplitude and systematic error go by its label.)
-    input_amplitude = dict(zip(fits, amplitudes))
-    systematic = {}
-    for label, sine_fit in fits.items():
-        noise = tracks[label].summary().get("angle_noise_measured_rad")
-        systematic[label] = noise / sine_fit.amplitude if noise and sine_fit.amplitude > 0 else 0.0
-    amplitude_checks = gain_against_amplitude(fr, [input_amplitude[label] for label in fr.labels],
-                                              [systematic[label] for label in fr.labels])
-    warnings.extend(w for w in (c.warning() for c in amplitude_checks) if w)
-    mode = "complex" if fit == "complex" or (fit == "auto" and phases_known) else "magnitude"
-    fr_fix, fr_bounds, _, _ = split_held(held_fix, held_bounds)
-    model = fit_transfer_function(fr, order=order, mode=mode, bootstrap=bootstrap, seed=0, fix=fr_fix or None,
-                                  bounds=fr_bounds or None)
-    if scale_error is not None:
-        model = with_gain_scale_uncertainty(model, *scale_error)
+    _add_tracking_warnings(campaign, tracks, warnings)
+
+    fits, amplitudes = fit_dwells(campaign, tracks, own_t0_stderr, order, warnings)
+    fr = dwell_response(campaign, fits, amplitudes, exposure)
+    mode = fit_mode(fit, fr, campaign)
+    checks = amplitude_checks(fr, fits, amplitudes, tracks)
+    warnings.extend(w for w in (c.warning() for c in checks) if w)
+    model = _fit_model(fr, order, mode, bootstrap, held, scale_error)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
 
@@ -468,100 +460,20 @@ def identify(
     fitted = {"gain": model.gain, **model.params, "dead_time_s": model.dead_time_s}
     selection = None
     if nonlinear != "none":
-        t0_se = math.hypot(shared_t0_s, float(np.median(list(own_t0_stderr.values()) or [0.0])))
-        selection = servo_model(
-            campaign, tracks, {label: f.window_s for label, f in fits.items()},
-            {label: (g, p, c) for label, g, p, c in zip(fr.labels, fr.gain, fr.phase_deg, fr.fidelity)},
-            fitted if order == (0, 2) and all(v is not None and math.isfinite(v) for v in fitted.values()) else None,
-            nonlinear=nonlinear, exposure_s=exposure_s, t0_stderr_s=t0_se, fix=held_fix, bounds=held_bounds,
-            ties=held_ties)
-        warnings.extend(w for w in selection.warnings + selection.selected.warnings if w not in warnings)
-    step = None
-    step_label = None
-    if campaign.step_tests:
-        test = campaign.step_tests[0]
-        track = tracks[test.label]
-        t0 = input_start(test, track)
-        if t0 is None:
-            warnings.append(f"{test.label}: step test without an input start (LED or t0_s): dead time not measured")
-        elif track.n_valid < 10:
-            warnings.append(f"{test.label}: step test has only {track.n_valid} valid frames; left out")
-        else:
-            def run_step(tf, track=track, test=test, t0=t0):
-                return analyse_step(track.angle_time_s, track.angle_rad, t0_s=t0, step_size=test.amplitude,
-                                    valid=track.valid, model=tf, t0_stderr_s=input_start_stderr(test, track))
+        selection = _time_domain_model(campaign, tracks, fits, fr, fitted, order, nonlinear, exposure_s,
+                                       (shared_t0_s, own_t0_stderr), held)
+        warnings.extend(w for w in [*selection.warnings, *selection.selected.warnings] if w not in warnings)
 
-            try:
-                step = run_step(model.transfer_function)
-                if step.dead_time_s is not None and step.dead_time_stderr_s is not None:
-                    # Fitted against the model's shape: the model's uncertainty is the step's too.
-                    model_se = step_dead_time_model_stderr(model, run_step)
-                    step = replace(step, dead_time_stderr_s=math.hypot(step.dead_time_stderr_s, model_se))
-            except ServoscopeError as exc:
-                # Also when the analysis stood and only its dead time's model error failed: left out whole.
-                step = None
-                if selection is not None:
-                    # A servo the frequency-domain model cannot describe (it ended unstable): the step is
-                    # analysed against the time-domain model's linear part, its dead time's error with it.
-                    try:
-                        step = replace(run_step(selection.selected.linear_transfer_function),
-                                       model_source=f"{selection.selected.structure} model's linear part")
-                        linear_se = selection.selected.stderr.get("dead_time_s") or 0.0
-                        if step.dead_time_stderr_s is not None:
-                            step = replace(step, dead_time_stderr_s=math.hypot(step.dead_time_stderr_s, linear_se))
-                        warnings.append(f"{test.label}: step analysed against the {selection.selected.structure} "
-                                        f"model's linear part (the frequency-domain model: {exc})")
-                    except ServoscopeError:
-                        step = None
-                if step is None:
-                    warnings.append(f"{test.label}: step test left out: {exc}")
-            if step is not None:
-                if not step.output_moved:
-                    # Metrics of a step that never moved would be NaN or noise.
-                    warnings.append(
-                        f"{test.label}: step test left out: the output never moves "
-                        f"(change within {STEP_DISCERNIBLE_SIGMA:g} noise sigma of the baseline)"
-                    )
-                    step = None
-                else:
-                    step_label = test.label
-        if len(campaign.step_tests) > 1:
-            warnings.append(f"{len(campaign.step_tests)} step tests: only the first ({test.label}) is analysed")
-    # The pitch axis once, for the blade's mode (step and dwells) and its heave per dwell.
-    step_track = tracks[step_label] if step_label else None
-    pivot = axis_of(tracks, fits, step_track)
-    modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
-    modes += dwell_modes(campaign, tracks, fits, pivot, model, modes)
-    heave = heave_response(campaign, tracks, fits, pivot, modes)
-    bending = bending_response(campaign, tracks, fits, modes)
-    flapping = heave_model(campaign, heave, fits, modes)
-    modes += [m for m in flapping.modes if m.source == "heave_response"] if flapping is not None else []
-    short = step_ringdown_warning(step, step_track, model, step_label or "", modes)
-    if short:
-        warnings.append(short)
-    warned: list[float] = []
-    for mode in modes:
-        if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
-            continue  # the same mode seen in the step and the dwells: one warning
-        warned.append(mode.frequency_hz)
-        near = [t.label for t in campaign.sine_tests if t.frequency_hz
-                and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
-        if near:
-            warnings.append(f"the blade's mode at {mode.frequency_hz:.3g} Hz (damping {mode.damping_ratio:.3f}) is "
-                            f"within its resonance of the dwell(s) {', '.join(near)}: the blade's own motion adds "
-                            "to the pitch there")
-    if shared_t0_s > 0 and model.dead_time_s is not None:
-        warnings.append(
-            f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
-            f"(±{1e3 * shared_t0_s:.2f} ms) may be one shared error that no averaging removes: the phase dead time's "
-            f"interval includes it"
-            + ("" if exposure.known else f"; exposure {exposure.detail}"))
-    disagreement = dead_time_disagreement(dead_time_estimates(model, step, shared_t0_s))
-    if disagreement:
-        warnings.append(disagreement)
+    step, step_label = step_test(campaign, tracks, model, selection, warnings)
+    blade = _blade_motions(campaign, tracks, fits, step, step_label, model, warnings)
+    warnings.extend(mode_warnings(campaign, blade.modes))
+    warnings.extend(dead_time_warnings(model, step, shared_t0_s, exposure))
     predicted = None
     if step_label is not None and order == (0, 2):
         predicted = predicted_step_fit_percent(campaign, tracks, step_label, fitted, exposure_s)
-    return IdentificationResult(campaign, tracks, fits, fr, model, step, step_label, warnings, exposure, shared_t0_s,
-                                amplitude_checks, modes, selection, predicted, heave, bending, flapping, view,
-                                plane_summary(campaign, tracks))
+    return IdentificationResult(
+        campaign=campaign, tracks=tracks, sine_fits=fits, frequency_response=fr, model=model, step=step,
+        step_label=step_label, warnings=warnings, exposure=exposure, shared_t0_stderr_s=shared_t0_s,
+        amplitude_checks=checks, modes=blade.modes, servo_model=selection,
+        predicted_step_fit_percent=predicted, heave_response=blade.heave, bending_response=blade.bending,
+        heave_model=blade.flapping, view=view, plane=plane_summary(campaign, tracks))

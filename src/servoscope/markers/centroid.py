@@ -30,10 +30,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..camera.undistort import distortion_centroid_offset  # re-exported: its home was here
 from .moments import Moments, weighted_moments
 
-__all__ = ["SoftCentroid", "soft_centroid", "distortion_centroid_offset"]
+__all__ = ["SoftCentroid", "soft_centroid"]
 
 #: Regularisation of the per-channel noise variance (DN²): the 8-bit
 #: quantization alone contributes 1/12 DN².

@@ -3,7 +3,7 @@
 The engines (:mod:`.rgb_engine`, :mod:`.yuv_engine`) differ in how they find and
 measure the markers; what they hand on is the same: one :class:`FrameRecord` a
 frame, added to a :class:`TrackLog`, from which the driver
-(:func:`servoscope.markers.track_video`) builds the :class:`~servoscope.markers.Track`.
+(:func:`servoscope.pipeline.track_video`) builds the :class:`~servoscope.markers.Track`.
 """
 
 from __future__ import annotations

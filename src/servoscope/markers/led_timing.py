@@ -17,7 +17,7 @@ from nothing to the whole interval would give, widened by the level's
 noise).
 
 Times here are those of the middle of each frame's exposure (the
-convention of :class:`~servoscope.markers.tracker.TrackerSettings`'s
+convention of :class:`~servoscope.markers.settings.TrackerSettings`'s
 ``timestamp`` is applied before, see :func:`exposure_middle_offset_s`).
 """
 

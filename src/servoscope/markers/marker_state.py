@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
 
 from .centroid import SoftCentroid, soft_centroid
-from ..camera.plane_map import area_scale_map
 from .colour import AUTO, BRIGHTNESS, BrightnessModel, ColourModel
 from .moments import Moments, weighted_moments
 from .settings import TrackerSettings
@@ -40,7 +40,8 @@ class MarkerTracker:
     #: Frames whose soft area and axes set the marker's reference shape.
     _REFERENCE_FRAMES = 5
 
-    def __init__(self, name: str, spec: tuple[float, float, float] | str, settings: TrackerSettings):
+    def __init__(self, name: str, spec: tuple[float, float, float] | str, settings: TrackerSettings, *,
+                 area_scale: Callable[[float, float], float] | None = None):
         self.name = name
         self.seed = spec
         # "auto" and brightness markers get their model from the first frame.
@@ -66,8 +67,9 @@ class MarkerTracker:
         # The sticker's perimeter over that of a disk of its area: edge effects scale with it.
         self.edge_factor = 1.0
         # An oblique view (a plane given) makes a sticker bigger where the plane is nearer: areas and
-        # axes are compared at the picture's centre's scale (None: square-on, nothing to undo).
-        self.area_scale = area_scale_map(settings.plane, settings.camera)
+        # axes are compared at the picture's centre's scale (None: square-on, nothing to undo). The
+        # camera stage's map (servoscope.camera.plane_map.area_scale_map), given by the pipeline.
+        self.area_scale = area_scale
 
     # -- detection ---------------------------------------------------------
     def _components(self, rgb: np.ndarray, window: tuple[int, int, int, int]):

@@ -5,8 +5,6 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from ..camera.model import CameraModel
-from ..camera.plane import Plane
 from ..defaults import LEAD_COLOUR, LED_COLOUR, TIMESTAMP, TRAIL_COLOUR
 from ..errors import ServoscopeError
 from .colour import BRIGHTNESS, parse_colour
@@ -27,7 +25,7 @@ class TrackerSettings:
         the lead is the one on the right of the picture.
     led : str or None
         LED colour; None when the footage has no LED.
-    camera : CameraModel or None
+    camera : servoscope.camera.CameraModel or None
         When given, centroids are undistorted before angles are computed.
     exposure_s : float or None
         Exposure (shutter) time, for the LED's sub-frame switch time; None
@@ -118,7 +116,7 @@ class TrackerSettings:
         bending (see :func:`servoscope.angle.rigid_motion`). Tracked two at a
         time by passes of their own over the video. Empty (the default): two
         markers, tracked as always.
-    plane : Plane or None
+    plane : servoscope.camera.Plane or None
         The blade's plane (``servoscope plane``'s plane.json): every centroid, undistorted
         first, is mapped into the plane (:meth:`~servoscope.camera.plane.Plane.to_rectified`:
         pixels of a square-on view at the picture's own scale) and the angle, the separation,
@@ -130,7 +128,10 @@ class TrackerSettings:
     lead: str = LEAD_COLOUR
     trail: str = TRAIL_COLOUR
     led: str | None = LED_COLOUR
-    camera: CameraModel | None = None
+    # `camera` and `plane` are the camera stage's (servoscope.camera.CameraModel, .Plane), named in
+    # these annotations only: markers comes before camera and carries them to the pipeline
+    # (servoscope.pipeline.tracker), which applies them; nothing here imports them.
+    camera: CameraModel | None = None  # noqa: F821
     exposure_s: float | None = None
     search_radius_px: float = 24.0
     support_margin_px: float = 2.0
@@ -146,7 +147,7 @@ class TrackerSettings:
     led_near: tuple[float, float] | None = None
     reference: tuple[str, str] | None = None
     extra: tuple[str, ...] = ()
-    plane: Plane | None = None
+    plane: Plane | None = None  # noqa: F821
 
     def __post_init__(self) -> None:
         if self.backend in DEPRECATED_BACKENDS:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +18,12 @@ def marker_names(n_extra: int) -> list[str]:
     return ["lead", "trail", *(f"extra{k + 1}" for k in range(n_extra))]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Track:
     """Per-frame measurements of one video.
+
+    Frozen: what a later stage adds (a view's correction, a warning) makes a new
+    track (:func:`dataclasses.replace`). Its arrays are not copied and not locked.
 
     Arrays have one entry per decoded frame. Coordinates are pixels in the
     ideal (undistorted) image when a camera model was given, else in the
@@ -49,7 +52,8 @@ class Track:
     t0_s : float or None
         LED switch-off time (the input's start), sub-frame.
     t0_uncertainty_s : float or None
-    warnings : list of str
+    warnings : tuple of str
+        (A list given is kept as a tuple.)
     snapshot_rgb : ndarray or None
         One frame, for drawing the detected centroids on it.
     snapshot_index : int
@@ -121,7 +125,7 @@ class Track:
     led_level: np.ndarray
     t0_s: float | None = None
     t0_uncertainty_s: float | None = None
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
     snapshot_rgb: np.ndarray | None = None
     snapshot_index: int = 0
     lead_sigma_px: np.ndarray | None = None
@@ -146,17 +150,19 @@ class Track:
     def __post_init__(self) -> None:
         # Tracks built by older code (or by hand) lack the uncertainty columns.
         n = int(np.asarray(self.frame).size)
+        # (Frozen: filled in once, here, through object.__setattr__.)
         for name in ("lead_sigma_px", "trail_sigma_px", "angle_sigma_rad"):
             if getattr(self, name) is None:
-                setattr(self, name, np.full(n, np.nan))
+                object.__setattr__(self, name, np.full(n, np.nan))
         for name in ("lead_shape_px2", "trail_shape_px2"):
             if getattr(self, name) is None:
-                setattr(self, name, np.full((n, 3), np.nan))
-        # A list (JSON's, the cache's) is the same colours.
-        self.extra_colours = tuple(self.extra_colours)
+                object.__setattr__(self, name, np.full((n, 3), np.nan))
+        # A list (JSON's, the cache's) is the same colours, and the same warnings.
+        object.__setattr__(self, "extra_colours", tuple(self.extra_colours))
+        object.__setattr__(self, "warnings", tuple(self.warnings))
         # ...and the angle's sample times: a global shutter's are the frame times.
         if self.angle_time_s is None:
-            self.angle_time_s = np.array(self.time_s, dtype=np.float64)
+            object.__setattr__(self, "angle_time_s", np.array(self.time_s, dtype=np.float64))
 
     @property
     def n_frames(self) -> int:

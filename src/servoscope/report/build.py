@@ -101,20 +101,27 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     result : IdentificationResult
     figures_dir : Path, optional
         Also write every figure there as PNG and SVG.
-
-    Long because it is the report's sections in reading order, each a few lines of HTML
-    around a figure or a table built elsewhere.
     """
-    fr = result.frequency_response
-    model = result.model
     summary = result.summary()
-    sections: list[ReportSection] = []
+    sections = [
+        model_section(result, summary, figures_dir),
+        frequency_response_section(result, figures_dir),
+        plane_section(result, figures_dir),
+        _blade_section(result, figures_dir) if result.modes or result.heave_response or result.bending_response
+        else None,
+        _servo_model_section(result, figures_dir) if result.servo_model is not None else None,
+        dwell_section(result, figures_dir),
+        step_section(result, figures_dir),
+        tracking_section(result, summary, figures_dir),
+    ]
+    return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}",
+                       [s for s in sections if s is not None])
 
-    s = ReportSection("Identified model", figures_dir=figures_dir)
-    dead = result.dead_time_s
-    s.text(model_equation(model, dead))
+
+def _fit_text(model) -> str:
+    """How the model was fitted: the fit's mode, its order, CIFER's J and the information criteria."""
     fit_info = model.summary().get("fit") or {}
-    s.text(
+    return (
         ("Fit: magnitude and phase with a dead time (every dwell's input start is known from the LED)"
          if model.mode == "complex" else "Fit: magnitude only, as in the paper (the dead time cannot be identified from |G|)")
         + f"; order (nb, na) = {tuple(model.order)}"
@@ -122,6 +129,11 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         + (f"; AIC {fit_info['AIC']:.4g}, BIC {fit_info['BIC']:.4g}" if fit_info.get("AIC") is not None else "")
         + "."
     )
+
+
+def parameter_table(result: "IdentificationResult") -> tuple[list[str], list[list[str]]]:
+    """The model's parameters: value, standard error, intervals (and bootstrap's, and the dwell each rests on most)."""
+    model = result.model
     boot = model.ci95_bootstrap or {}
     influence = model.influence or {}
     header = (["parameter", "value", "standard error", "95 % interval"] + (["95 % bootstrap"] if boot else [])
@@ -150,13 +162,13 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                        f"{inf['dwell']}: {format_with_uncertainty(inf['without'], err)[0]} "
                        f"({inf['shift_stderr']:+.1f} σ)")
         rows.append(row)
-    s.table(header, rows)
-    if model.stderr_jackknife is not None:
-        s.text("Standard errors: the larger of the Jacobian's (scaled by the misfit when the residuals exceed their "
-               "stated errors) and the delete-one-dwell jackknife's, which refits the model with each dwell left "
-               "out: a dwell with an error its own statistics cannot show (the codec shrinking the smallest "
-               "motions, a resonance the model lacks) widens the interval of what rests on it.")
-    other = [
+    return header, rows
+
+
+def _quantities(result: "IdentificationResult") -> list[list]:
+    """The model's other quantities: bandwidth, dead times, exposure, the fit's residuals."""
+    model = result.model
+    return [
         ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
         ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],
         *dead_time_rows(result),
@@ -164,22 +176,72 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db],
         ["residual RMS of the fit, phase (deg)", model.residual_rms_deg],
     ]
-    s.table(["quantity", "value"], other)
+
+
+def _add_warnings(s: ReportSection, result: "IdentificationResult", summary: dict) -> None:
+    """Every warning, the campaign's and each test's (each once), or a line saying there are none."""
     all_warnings = list(result.warnings) + [w for t in summary["tests"] for w in (f"{t['label']}: {x}" for x in t["warnings"])]
     if all_warnings:
         s.warnings(list(dict.fromkeys(all_warnings)))
     else:
         s.html_parts.append('<p class="ok">No warnings.</p>')
-    selection = model.order_selection
-    if selection is not None:
-        s.text(
-            f"Order selection: the gain falls by {selection.slope_db_per_decade:.1f} dB/decade at the top of the data "
-            f"(relative degree ≥ {selection.relative_degree_estimate}); candidates compared by BIC and J:"
-        )
-        cols = ["order", "n_params", "J", "AIC", "BIC", "residual_rms_db", "determined", "chosen"]
-        s.table(cols, [[str(tuple(r["order"])) if k == "order" else r.get(k) for k in cols] for r in selection.table])
-    sections.append(s)
 
+
+def _add_order_selection(s: ReportSection, selection) -> None:
+    """How the model's order was chosen (``order="auto"``): the slope and the candidates compared."""
+    s.text(
+        f"Order selection: the gain falls by {selection.slope_db_per_decade:.1f} dB/decade at the top of the data "
+        f"(relative degree ≥ {selection.relative_degree_estimate}); candidates compared by BIC and J:"
+    )
+    cols = ["order", "n_params", "J", "AIC", "BIC", "residual_rms_db", "determined", "chosen"]
+    s.table(cols, [[str(tuple(r["order"])) if k == "order" else r.get(k) for k in cols] for r in selection.table])
+
+
+def model_section(result: "IdentificationResult", summary: dict, figures_dir) -> ReportSection:
+    """The identified model: its equation, how it was fitted, its parameters and quantities, the warnings."""
+    model = result.model
+    s = ReportSection("Identified model", figures_dir=figures_dir)
+    s.text(model_equation(model, result.dead_time_s))
+    s.text(_fit_text(model))
+    s.table(*parameter_table(result))
+    if model.stderr_jackknife is not None:
+        s.text("Standard errors: the larger of the Jacobian's (scaled by the misfit when the residuals exceed their "
+               "stated errors) and the delete-one-dwell jackknife's, which refits the model with each dwell left "
+               "out: a dwell with an error its own statistics cannot show (the codec shrinking the smallest "
+               "motions, a resonance the model lacks) widens the interval of what rests on it.")
+    s.table(["quantity", "value"], _quantities(result))
+    _add_warnings(s, result, summary)
+    if model.order_selection is not None:
+        _add_order_selection(s, model.order_selection)
+    return s
+
+
+def _dwell_rows(result: "IdentificationResult") -> tuple[list[str], list[list], bool]:
+    """The frequency response's table, one row per dwell; whether the codec check's column is in it."""
+    fr = result.frequency_response
+    dwell_rows = []
+    fits_in_order = [result.sine_fits.get(label) for label in fr.labels]
+    checked = any(f is not None and f.codec_gain_bias is not None for f in fits_in_order)
+    for r, sine_fit in zip(fr.summary(), fits_in_order):
+        gain, gain_se = format_with_uncertainty(r["gain"], r.get("gain_stderr"))
+        phase, phase_se = format_with_uncertainty(r["phase_deg"], r.get("phase_stderr_deg"))
+        gain_db_se = None if r.get("gain_stderr") is None else 20.0 / math.log(10.0) * r["gain_stderr"] / r["gain"]
+        gain_db = format_with_uncertainty(r["gain_db"], gain_db_se)[0]
+        row = [r["video"], format_value(r["frequency_hz"], 4), gain, gain_se, gain_db, phase, phase_se,
+               format_value(r["fidelity"], 5), format_value(r.get("thd"), 2), ", ".join((r.get("flags") or "").split()) or "—"]
+        if checked:
+            row.append(_codec_cell(sine_fit))
+        dwell_rows.append(row)
+    header = (["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"]
+              + (["codec: other frames against the I-frames"] if checked else []))
+    return header, dwell_rows, checked
+
+
+def frequency_response_section(result: "IdentificationResult", figures_dir) -> ReportSection:
+    """The Bode plot, the gain against the input amplitude, and the dwells' table."""
+    fr = result.frequency_response
+    model = result.model
+    dead = result.dead_time_s
     s = ReportSection("Frequency response", figures_dir=figures_dir)
     omega_grid = np.logspace(np.log10(2 * np.pi * fr.frequency_hz.min() / 2), np.log10(2 * np.pi * fr.frequency_hz.max() * 2), 300)
     fig = bode_figure(
@@ -201,35 +263,17 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
                  f"Each frequency's gains at its input amplitudes, against their weighted mean: a linear servo's agree "
                  f"within their errors (χ² test, not linear below p = 0.001). {verdicts}.",
                  "Gain against input amplitude", name="amplitude")
-    dwell_rows = []
-    fits_in_order = [result.sine_fits.get(label) for label in fr.labels]
-    checked = any(f is not None and f.codec_gain_bias is not None for f in fits_in_order)
-    for r, sine_fit in zip(fr.summary(), fits_in_order):
-        gain, gain_se = format_with_uncertainty(r["gain"], r.get("gain_stderr"))
-        phase, phase_se = format_with_uncertainty(r["phase_deg"], r.get("phase_stderr_deg"))
-        gain_db_se = None if r.get("gain_stderr") is None else 20.0 / math.log(10.0) * r["gain_stderr"] / r["gain"]
-        gain_db = format_with_uncertainty(r["gain_db"], gain_db_se)[0]
-        row = [r["video"], format_value(r["frequency_hz"], 4), gain, gain_se, gain_db, phase, phase_se,
-               format_value(r["fidelity"], 5), format_value(r.get("thd"), 2), ", ".join((r.get("flags") or "").split()) or "—"]
-        if checked:
-            row.append(_codec_cell(sine_fit))
-        dwell_rows.append(row)
-    s.table(["dwell", "f (Hz)", "gain", "± s.e.", "gain (dB)", "phase (deg)", "± s.e.", "fidelity", "THD", "flags"]
-            + (["codec: other frames against the I-frames"] if checked else []), dwell_rows)
+    header, dwell_rows, checked = _dwell_rows(result)
+    s.table(header, dwell_rows)
     if checked:
         s.text("Where a dwell has enough I-frames (frames the codec coded on their own), its gain and phase are "
                "fitted to them alone: the codec's motion prediction cannot hold the sticker back there. The last "
                "column is how much the other frames' amplitude differs (docs/accuracy.md, \"The codec check\").")
-    sections.append(s)
+    return s
 
-    view_section = plane_section(result, figures_dir)
-    if view_section is not None:
-        sections.append(view_section)
-    if result.modes or result.heave_response or result.bending_response:
-        sections.append(_blade_section(result, figures_dir))
-    if result.servo_model is not None:
-        sections.append(_servo_model_section(result, figures_dir))
 
+def dwell_section(result: "IdentificationResult", figures_dir) -> ReportSection:
+    """One dwell's trace with its fitted sine (the dwell nearest the bandwidth), then every dwell's thumbnail."""
     label = _representative_dwell(result)
     fit = result.sine_fits[label]
     track = result.tracks[label]
@@ -254,83 +298,91 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
             thumbs.append((fig, f"{other}: amplitude {other_fit.amplitude:.4g} rad, fidelity {other_fit.fidelity:.4f}",
                            f"trace_{other}"))
         s.thumbnails(thumbs)
-    sections.append(s)
+    return s
 
-    if result.step is not None and result.step_label is not None:
-        st = result.step
-        strack = result.tracks[result.step_label]
-        s = ReportSection(f"Step response: {result.step_label}", figures_dir=figures_dir)
-        predicted = st.predicted(strack.time_s)
-        s.figure(
-            step_figure(strack.time_s, strack.angle_rad, strack.valid, predicted, t0_s=strack.t0_s, dead_time_s=st.dead_time_s),
-            "Measured step response and the identified model's prediction (dead time fitted on this test).",
-            "Step response",
-            name="step",
-        )
-        from ..sysid import model_step_metrics
 
-        # Predicted with the same dead time, so that both columns count from the input start.
-        predicted_metrics = model_step_metrics(model.transfer_function, dead_time_s=st.dead_time_s or 0.0)
-        s.table(
-            ["metric", "measured", "predicted by the model"],
-            [
-                ["10–90 % rise time (s)", st.rise_time_s, predicted_metrics.get("rise_time_s")],
-                ["overshoot (%)", st.overshoot_pct, predicted_metrics.get("overshoot_pct")],
-                ["2 % settling time (s)", st.settling_time_s, predicted_metrics.get("settling_time_s")],
-                ["dead time, model fit (s)", st.dead_time_s, None],
-                ["dead time, first visible motion (s)", st.dead_time_threshold_s, None],
-            ],
-        )
-        sections.append(s)
+def step_section(result: "IdentificationResult", figures_dir) -> ReportSection | None:
+    """The step test measured against the model's prediction, and its metrics; None without a step."""
+    if result.step is None or result.step_label is None:
+        return None
+    model = result.model
+    st = result.step
+    strack = result.tracks[result.step_label]
+    s = ReportSection(f"Step response: {result.step_label}", figures_dir=figures_dir)
+    predicted = st.predicted(strack.time_s)
+    s.figure(
+        step_figure(strack.time_s, strack.angle_rad, strack.valid, predicted, t0_s=strack.t0_s, dead_time_s=st.dead_time_s),
+        "Measured step response and the identified model's prediction (dead time fitted on this test).",
+        "Step response",
+        name="step",
+    )
+    from ..sysid import model_step_metrics
 
+    # Predicted with the same dead time, so that both columns count from the input start.
+    predicted_metrics = model_step_metrics(model.transfer_function, dead_time_s=st.dead_time_s or 0.0)
+    s.table(
+        ["metric", "measured", "predicted by the model"],
+        [
+            ["10–90 % rise time (s)", st.rise_time_s, predicted_metrics.get("rise_time_s")],
+            ["overshoot (%)", st.overshoot_pct, predicted_metrics.get("overshoot_pct")],
+            ["2 % settling time (s)", st.settling_time_s, predicted_metrics.get("settling_time_s")],
+            ["dead time, model fit (s)", st.dead_time_s, None],
+            ["dead time, first visible motion (s)", st.dead_time_threshold_s, None],
+        ],
+    )
+    return s
+
+
+def tracking_section(result: "IdentificationResult", summary: dict, figures_dir) -> ReportSection | None:
+    """The tracking check (paper Fig. 4, 6): a frame with the centroids, the segmentation, the error analysis, the
+    videos' table; None without a snapshot."""
     # Fig. 4: a frame with the centroids and the joining line.
     first = result.campaign.tests[0].label
     track = result.tracks[first]
-    if track.snapshot_rgb is not None:
-        i = track.snapshot_index
-        lead, trail = _track_xy_recorded(result, first, i)
-        s = ReportSection("Tracking check", figures_dir=figures_dir)
+    if track.snapshot_rgb is None:
+        return None
+    i = track.snapshot_index
+    lead, trail = _track_xy_recorded(result, first, i)
+    s = ReportSection("Tracking check", figures_dir=figures_dir)
+    s.figure(
+        overlay_figure(track.snapshot_rgb, lead, trail, float(track.angle_rad[i]), title=f"{first}, frame {i}: detected centroids (paper Fig. 4)"),
+        "Squares: the markers' centroids; solid line: the line joining them; dashed: horizontal reference.",
+        "Frame with detected centroids",
+        name="overlay",
+    )
+    segmentation = _segmentation(result, track, lead, trail)
+    if segmentation is not None:
+        s.figure(segmentation, "Pixels within each marker's colour band, or past its brightness threshold on monochrome footage (before the soft, subpixel weighting), and each marker zoomed with its centroid.", "Segmentation", name="segmentation")
+    from ..markers.error_analysis import angle_error_analysis, plot_angle_error
+
+    analysis = angle_error_analysis(track)
+    if analysis.get("separation_px") and math.isfinite(analysis["separation_px"]):
         s.figure(
-            overlay_figure(track.snapshot_rgb, lead, trail, float(track.angle_rad[i]), title=f"{first}, frame {i}: detected centroids (paper Fig. 4)"),
-            "Squares: the markers' centroids; solid line: the line joining them; dashed: horizontal reference.",
-            "Frame with detected centroids",
-            name="overlay",
+            plot_angle_error(analysis),
+            f"Angle error against sticker separation (paper Fig. 6): at {analysis['separation_px']:.0f} px, "
+            f"a 1 px centroid error bounds the angle error at {analysis['worst_case_deg']:.3f}°; the measured "
+            f"centroid noise from the pixels ({analysis['centroid_sigma_px']:.3f} px) gives "
+            f"{analysis['angle_sigma_deg']:.4f}° (1σ)"
+            + (f"; the tracking error measured on the two markers' rigid-motion null channel, codec errors "
+               f"included, is {analysis['measured_noise_deg']:.4f}° RMS." if analysis.get("measured_noise_deg")
+               else "."),
+            "Error analysis",
+            name="error_analysis",
         )
-        segmentation = _segmentation(result, track, lead, trail)
-        if segmentation is not None:
-            s.figure(segmentation, "Pixels within each marker's colour band, or past its brightness threshold on monochrome footage (before the soft, subpixel weighting), and each marker zoomed with its centroid.", "Segmentation", name="segmentation")
-        from ..markers.error_analysis import angle_error_analysis, plot_angle_error
+    with_reference = any(t.get("reference_motion_rad") for t in summary["tests"])
 
-        analysis = angle_error_analysis(track)
-        if analysis.get("separation_px") and math.isfinite(analysis["separation_px"]):
-            s.figure(
-                plot_angle_error(analysis),
-                f"Angle error against sticker separation (paper Fig. 6): at {analysis['separation_px']:.0f} px, "
-                f"a 1 px centroid error bounds the angle error at {analysis['worst_case_deg']:.3f}°; the measured "
-                f"centroid noise from the pixels ({analysis['centroid_sigma_px']:.3f} px) gives "
-                f"{analysis['angle_sigma_deg']:.4f}° (1σ)"
-                + (f"; the tracking error measured on the two markers' rigid-motion null channel, codec errors "
-                   f"included, is {analysis['measured_noise_deg']:.4f}° RMS." if analysis.get("measured_noise_deg")
-                   else "."),
-                "Error analysis",
-                name="error_analysis",
-            )
-        with_reference = any(t.get("reference_motion_rad") for t in summary["tests"])
+    def turned(t: dict) -> str:
+        m = t.get("reference_motion_rad")
+        return "—" if not m else (f"{math.degrees(m['peak_to_peak']):.3f}° p-p, "
+                                  f"{math.degrees(m['rms']):.3f}° RMS")
 
-        def turned(t: dict) -> str:
-            m = t.get("reference_motion_rad")
-            return "—" if not m else (f"{math.degrees(m['peak_to_peak']):.3f}° p-p, "
-                                      f"{math.degrees(m['rms']):.3f}° RMS")
-
-        s.table(
-            ["video", "frames", "valid", "t0 (s)"] + (["reference line turned (taken off)"] if with_reference else [])
-            + ["warnings"],
-            [[t["video"], t["frames"], t["valid_frames"], t["t0_s"]] + ([turned(t)] if with_reference else [])
-             + ["; ".join(t["warnings"]) or "—"] for t in summary["tests"]],
-        )
-        sections.append(s)
-
-    return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}", sections)
+    s.table(
+        ["video", "frames", "valid", "t0 (s)"] + (["reference line turned (taken off)"] if with_reference else [])
+        + ["warnings"],
+        [[t["video"], t["frames"], t["valid_frames"], t["t0_s"]] + ([turned(t)] if with_reference else [])
+         + ["; ".join(t["warnings"]) or "—"] for t in summary["tests"]],
+    )
+    return s
 
 
 def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportSection:

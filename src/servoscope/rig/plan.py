@@ -21,9 +21,7 @@ Warning rules (see ``docs/rig.md``):
 
 from __future__ import annotations
 
-import json
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from collections.abc import Sequence
@@ -33,7 +31,6 @@ import numpy as np
 
 from ..defaults import LEAD_COLOUR, LED_COLOUR, MIN_DWELL_S, SETTLE_AUTO, SETTLE_S, TRAIL_COLOUR
 from ..errors import ServoscopeError
-from .._io import write_text_atomic
 
 __all__ = [
     "Dwell",
@@ -45,6 +42,7 @@ __all__ = [
     "read_plan",
     "write_plan",
     "plan_to_toml",
+    "plan_campaign",
     "default_video_name",
     "with_videos",
     "MIN_FRAMES_PER_PERIOD",
@@ -61,9 +59,6 @@ MIN_UPDATES_PER_PERIOD = 2.5
 PWM_HARMONICS = 4
 
 _DEFAULT_MARKERS = {"lead": LEAD_COLOUR, "trail": TRAIL_COLOUR, "led": LED_COLOUR}
-_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label"}
-_PLAN_KEYS = {"fps", "update_hz", "settle_s", "periods", "min_seconds", "lead_in_s", "tail_s", "rest_s", "dwells", "drive"}
-_DWELL_KEYS = {"duration_s", "warnings", "max_late_ms"}
 
 
 @dataclass(frozen=True)
@@ -404,31 +399,50 @@ def default_video_name(index: int, dwell: Dwell, n_steps: int = 1) -> str:
 
 
 # ---------------------------------------------------------------------------
-# TOML text (written by hand: no tomli_w dependency).
+# The plan as a campaign: written and read as campaign.toml (servoscope.campaign.toml_io).
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ValueError(f"cannot write {value} to TOML")
-        return repr(value)  # shortest round-trip form; valid TOML (e.g. 0.5, 1e-05)
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)  # JSON string escapes are valid TOML basic strings
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+def _header(plan: SweepPlan) -> str:
+    if all(d.video for d in plan.dwells):
+        return "# servoscope campaign, recorded by `servoscope drive`\n\n"
+    return "# servoscope campaign plan: `servoscope drive` fills in the videos\n\n"
 
 
-def _toml_table(lines: list[str], header: str, table: dict[str, Any]) -> None:
-    lines.append(header)
-    for key, value in table.items():
-        if value is not None:
-            lines.append(f"{key} = {_toml_value(value)}")
-    lines.append("")
+def _plan_table(plan: SweepPlan) -> dict[str, Any]:
+    """``[plan]``: the rig's settings, ``[plan.drive]`` once driven, one ``[[plan.dwells]]`` per test."""
+    table: dict[str, Any] = {
+        "fps": float(plan.fps), "update_hz": float(plan.update_hz), "settle_s": float(plan.settle_s),
+        "periods": float(plan.periods), "min_seconds": float(plan.min_seconds),
+        "lead_in_s": float(plan.lead_in_s), "tail_s": float(plan.tail_s), "rest_s": float(plan.rest_s),
+    }
+    if plan.drive:
+        table["drive"] = dict(plan.drive)
+    table["dwells"] = [{k: v for k, v in {"duration_s": float(d.duration_s), "warnings": list(d.warnings),
+                                           "max_late_ms": d.max_late_ms}.items() if v is not None}
+                       for d in plan.dwells]
+    return table
+
+
+def plan_campaign(plan: SweepPlan, path: str | Path = "campaign.toml", *, include_plan: bool = True):
+    """The plan as a :class:`~servoscope.campaign.manifest.Campaign` whose manifest would be ``path``.
+
+    Its tests have no video until driven; with ``include_plan`` it keeps the ``[plan]`` table.
+    The camera's files are named, not read.
+    """
+    from ..campaign.manifest import campaign_from_data
+
+    data: dict[str, Any] = {"camera": dict(plan.camera)} if plan.camera else {}
+    data.update({
+        "markers": dict(plan.markers), "input": {"units": plan.units},
+        "analysis": {"settle_s": SETTLE_AUTO if plan.settle_auto else float(plan.settle_s)},
+        "tests": [{k: v for k, v in {
+            "video": d.video, "label": d.label, "kind": d.kind,
+            "frequency_hz": None if d.frequency_hz is None else float(d.frequency_hz),
+            "amplitude": float(d.amplitude)}.items() if v is not None} for d in plan.dwells],
+        "plan": _plan_table(plan),
+    })
+    campaign = campaign_from_data(data, Path(path), check_videos=False, planned=True, read_files=False)
+    return campaign if include_plan else replace(campaign, plan={})
 
 
 def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
@@ -443,60 +457,22 @@ def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
     Returns
     -------
     str
-        TOML that :func:`tomllib.loads` reads back to the same plan.
+        TOML that :func:`read_plan` reads back to the same plan (:meth:`Campaign.to_toml
+        <servoscope.campaign.manifest.Campaign.to_toml>`).
     """
-    complete = all(d.video for d in plan.dwells)
-    lines = ["# servoscope campaign, recorded by `servoscope drive`" if complete
-             else "# servoscope campaign plan: `servoscope drive` fills in the videos", ""]
-    if plan.camera:
-        _toml_table(lines, "[camera]", plan.camera)
-    _toml_table(lines, "[markers]", plan.markers)
-    _toml_table(lines, "[input]", {"units": plan.units})
-    _toml_table(lines, "[analysis]", {"settle_s": SETTLE_AUTO if plan.settle_auto else float(plan.settle_s)})
-    for d in plan.dwells:
-        _toml_table(lines, "[[tests]]", {
-            "video": d.video, "label": d.label, "kind": d.kind,
-            "frequency_hz": None if d.frequency_hz is None else float(d.frequency_hz),
-            "amplitude": float(d.amplitude),
-        })
-    if include_plan:
-        _toml_table(lines, "[plan]", {
-            "fps": float(plan.fps), "update_hz": float(plan.update_hz), "settle_s": float(plan.settle_s),
-            "periods": float(plan.periods), "min_seconds": float(plan.min_seconds),
-            "lead_in_s": float(plan.lead_in_s), "tail_s": float(plan.tail_s), "rest_s": float(plan.rest_s),
-        })
-        if plan.drive:
-            _toml_table(lines, "[plan.drive]", plan.drive)
-        for d in plan.dwells:
-            _toml_table(lines, "[[plan.dwells]]", {
-                "duration_s": float(d.duration_s), "warnings": list(d.warnings),
-                "max_late_ms": d.max_late_ms,
-            })
-    return "\n".join(lines).rstrip("\n") + "\n"
+    return plan_campaign(plan, include_plan=include_plan).to_toml(_header(plan))
 
 
 def write_plan(plan: SweepPlan, path: str | Path) -> Path:
-    """Write :func:`plan_to_toml` to ``path``; returns the path."""
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(path, plan_to_toml(plan))
-    except OSError as exc:
-        raise ServoscopeError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    return path
-
-
-def _num(path: Path, where: str, value: Any, *, positive: bool = False, allow_zero: bool = True) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ServoscopeError(f"{path}: {where} must be a number")
-    value = float(value)
-    if positive and (value < 0 or (value == 0 and not allow_zero)):
-        raise ServoscopeError(f"{path}: {where} must be {'≥ 0' if allow_zero else '> 0'}")
-    return value
+    """Write :func:`plan_to_toml` to ``path`` (atomically); returns the path."""
+    return plan_campaign(plan, path).save(path, header=_header(plan))
 
 
 def read_plan(path: str | Path) -> SweepPlan:
     """Read a plan written by ``servoscope plan`` (or a campaign written by ``drive``).
+
+    Read as a campaign (:meth:`Campaign.load <servoscope.campaign.manifest.Campaign.load>`
+    with ``planned=True``): every problem of the file is reported at once.
 
     Parameters
     ----------
@@ -510,93 +486,36 @@ def read_plan(path: str | Path) -> SweepPlan:
     ------
     ServoscopeError
         If the file is missing, not TOML, has no ``[plan]`` table, or its
-        tests and ``[[plan.dwells]]`` disagree.
+        tests and ``[[plan.dwells]]`` disagree (with every other problem).
     """
+    from ..campaign.manifest import Campaign
+    from ..campaign.toml_io import camera_table, markers_table, test_entries
+
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ServoscopeError(f"{path}: no such plan (make one with `servoscope plan`)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ServoscopeError(f"{path}: cannot read ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ServoscopeError(f"{path}: not valid TOML ({exc})") from None
-    plan_t = data.get("plan")
-    if not isinstance(plan_t, dict):
-        raise ServoscopeError(f"{path}: no [plan] table (make a plan with `servoscope plan`)")
-    for key in plan_t:
-        if key not in _PLAN_KEYS:
-            raise ServoscopeError(f"{path}: [plan] has an unknown key {key!r}")
-    tests = data.get("tests")
-    dwells_t = plan_t.get("dwells")
-    if not isinstance(tests, list) or not tests:
-        raise ServoscopeError(f"{path}: no [[tests]]")
-    if not isinstance(dwells_t, list) or len(dwells_t) != len(tests):
-        raise ServoscopeError(f"{path}: [[plan.dwells]] must have one entry per [[tests]] ({len(tests)})")
-    get = lambda key, default=None, **kw: _num(path, f"[plan] {key}", plan_t.get(key, default), **kw)  # noqa: E731
-    dwells = []
-    for i, (entry, extra) in enumerate(zip(tests, dwells_t), start=1):
-        where = f"[[tests]] #{i}"
-        if not isinstance(entry, dict) or not isinstance(extra, dict):
-            raise ServoscopeError(f"{path}: {where} must be a table")
-        for key in entry:
-            if key not in _TEST_KEYS:
-                raise ServoscopeError(f"{path}: {where} has an unknown key {key!r} (a plan's tests take {', '.join(sorted(_TEST_KEYS))})")
-        for key in extra:
-            if key not in _DWELL_KEYS:
-                raise ServoscopeError(f"{path}: [[plan.dwells]] #{i} has an unknown key {key!r}")
-        kind = entry.get("kind")
-        if kind not in ("sine", "step"):
-            raise ServoscopeError(f"{path}: {where}: kind must be \"sine\" or \"step\", not {kind!r}")
-        amplitude = _num(path, f"{where} amplitude", entry.get("amplitude"))
-        if amplitude == 0 or (kind == "sine" and amplitude < 0):
-            raise ServoscopeError(f"{path}: {where} amplitude must be {'> 0' if kind == 'sine' else '≠ 0'}")
-        freq = None
-        if kind == "sine":
-            freq = _num(path, f"{where} frequency_hz", entry.get("frequency_hz"), positive=True, allow_zero=False)
-        duration = _num(path, f"[[plan.dwells]] #{i} duration_s", extra.get("duration_s"), positive=True, allow_zero=False)
-        warnings = extra.get("warnings", [])
-        if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
-            raise ServoscopeError(f"{path}: [[plan.dwells]] #{i} warnings must be a list of text")
-        for key in ("video", "label"):
-            if key in entry and not (isinstance(entry[key], str) and entry[key]):
-                raise ServoscopeError(f"{path}: {where} {key} must be text")
-        dwells.append(Dwell(kind, amplitude, freq, duration, tuple(warnings), entry.get("video"), entry.get("label"),
-                            extra.get("max_late_ms")))
-    markers = data.get("markers", dict(_DEFAULT_MARKERS))
-    units = data.get("input", {}).get("units", "normalized")
-    camera = data.get("camera", {})
-    if not isinstance(markers, dict) or not isinstance(camera, dict) or not isinstance(units, str):
-        raise ServoscopeError(f"{path}: [markers], [camera] must be tables and [input] units text")
-    drive = plan_t.get("drive", {})
+    if not path.exists():
+        raise ServoscopeError(f"{path}: no such plan (make one with `servoscope plan`)")
+    campaign = Campaign.load(path, check_videos=False, planned=True)
+    plan_t = campaign.plan
+    dwells = tuple(
+        Dwell(t.kind, t.amplitude, t.frequency_hz, float(extra["duration_s"]), tuple(extra.get("warnings", [])),
+              entry.get("video"), entry.get("label"), extra.get("max_late_ms"))
+        for t, entry, extra in zip(campaign.tests, test_entries(campaign), plan_t["dwells"], strict=True))
+    auto = campaign.settle_s == SETTLE_AUTO
+
+    def get(key: str, default: float) -> float:
+        return float(plan_t.get(key, default))
+
     return SweepPlan(
-        fps=get("fps", positive=True, allow_zero=False),
-        update_hz=get("update_hz", 50.0, positive=True, allow_zero=False),
-        settle_s=get("settle_s", _analysis_settle_s(data), positive=True),
-        periods=get("periods", 8.0, positive=True, allow_zero=False),
-        min_seconds=get("min_seconds", MIN_DWELL_S, positive=True),
-        lead_in_s=get("lead_in_s", 1.0, positive=True),
-        tail_s=get("tail_s", 0.5, positive=True),
-        rest_s=get("rest_s", 2.0, positive=True),
-        dwells=tuple(dwells), markers=dict(markers), units=units, camera=dict(camera),
-        drive=dict(drive) if isinstance(drive, dict) else {},
-        settle_auto=_analysis(data).get("settle_s") == SETTLE_AUTO,
+        fps=float(plan_t["fps"]), update_hz=get("update_hz", 50.0),
+        # A plan needs seconds to time its dwells: settle_s = "auto" leaves it the default.
+        settle_s=get("settle_s", SETTLE_S if auto else campaign.settle_s),
+        periods=get("periods", 8.0), min_seconds=get("min_seconds", MIN_DWELL_S),
+        lead_in_s=get("lead_in_s", 1.0), tail_s=get("tail_s", 0.5), rest_s=get("rest_s", 2.0),
+        dwells=dwells, units=campaign.input_units,
+        markers={k: v for k, v in markers_table(campaign).items() if v is not None},
+        camera={k: v for k, v in camera_table(campaign).items() if v is not None},
+        drive=dict(plan_t.get("drive", {})), settle_auto=auto,
     )
-
-
-def _analysis(data: dict) -> dict:
-    analysis = data.get("analysis", {})
-    return analysis if isinstance(analysis, dict) else {}
-
-
-def _analysis_settle_s(data: dict) -> Any:
-    """A plan's settling time when ``[plan]`` says none: ``[analysis] settle_s``, else the default.
-
-    A plan needs seconds to time its dwells: ``settle_s = "auto"`` (each dwell's own, found by
-    the fit) leaves the plan the default.
-    """
-    settle = _analysis(data).get("settle_s", SETTLE_S)
-    return SETTLE_S if settle == SETTLE_AUTO else settle
 
 
 def with_videos(plan: SweepPlan, videos: list[str]) -> SweepPlan:

@@ -21,16 +21,18 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..video.sequence_writer import MRAW_NAME, MrawWriter, TiffSequenceWriter
+from ..video.sequence_writer import MrawWriter, TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
-from ..defaults import REFERENCE_COLOURS, TIMESTAMP
+from ..defaults import REFERENCE_COLOURS
 from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
 from .._io import atomic_path, write_text_atomic
 from .board import PLANE_MM_PER_PX, render_board_photo
+from .blade_modes import shape_along_chord, blade_modes_of, mode_heaves_px, mode_shape
+from .manifest import TWIN_HEADER, twin_campaign
 
 #: A preset's default real-camera options, to tell which ones a campaign set.
 _DEFAULT = CampaignPreset(name="default", servo=None, frequencies_hz=(1.0,))
@@ -63,15 +65,6 @@ def step_metrics(servo: ServoModel) -> dict[str, float | None]:
 
     return {"rise_time_s": clean(info["RiseTime"]), "overshoot_pct": clean(info["Overshoot"]),
             "settling_time_s": clean(info["SettlingTime"])}
-
-
-def _toml_str(s: str) -> str:
-    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
-def _toml_float(v: float) -> str:
-    r = repr(float(v))
-    return r if ("." in r or "e" in r) else r + ".0"
 
 
 def exposure_averaged_response(servo, signal: InputSignal, time_s: np.ndarray, exposure_s: float,
@@ -175,7 +168,7 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     angle = marker_angle_rad(lead, trail)
     led = led_exposure_fraction(time_s, signal.t0_s, preset.exposure_s)
     modes = blade_modes_of(preset)
-    shapes = [_shape_along_chord(scene, bend) if bend else None for *_, bend in modes] or [None]
+    shapes = [shape_along_chord(scene, bend) if bend else None for *_, bend in modes] or [None]
     renderer = FrameRenderer(scene, preset.camera(), noise_sigma_dn=preset.noise_sigma_dn, noise_seed=noise_seed,
                              mode_shape=shapes if len(shapes) > 1 else shapes[0], view=preset.view())
     extra_xy = scene.to_image(scene.extra_centres_uv(), pitch) if scene.extra_stickers else None
@@ -263,56 +256,6 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
         **({"blur_samples": int(blur[1].shape[1])} if blur is not None else {}),
     })
     return rec
-
-
-def blade_modes_of(preset: CampaignPreset) -> list[tuple[float, float, float, float]]:
-    """The blade's modes as ``(frequency_hz, damping_ratio, px_per_rad, bend)``: none, one or two."""
-    if preset.blade_mode_hz <= 0:
-        return []
-    first = (preset.blade_mode_hz, preset.blade_mode_damping, preset.blade_mode_px_per_rad, preset.blade_mode_bend)
-    return [first] + ([tuple(preset.blade_mode2)] if preset.blade_mode2 is not None else [])
-
-
-def _shape_along_chord(scene: Scene, bend: float) -> Callable[[np.ndarray], np.ndarray]:
-    """A blade mode's share of its heave at chord coordinate u (blade frame, px).
-
-    ``1 − 4·bend·f·(1 − f)``, f the place's position from the trail sticker (0) to the lead (1)
-    along the chord: the lead and trail stickers move with the heave, the blade between them
-    less (``bend`` > 0), beyond them more.
-    """
-    lead, trail = scene.sticker_centres_uv()
-
-    def share(u: np.ndarray) -> np.ndarray:
-        f = (np.asarray(u, dtype=np.float64) - trail[0]) / (lead[0] - trail[0])
-        return 1.0 - 4.0 * bend * f * (1.0 - f)
-    return share
-
-
-def mode_shape(scene: Scene, bend: float) -> tuple[float, ...]:
-    """A blade mode's share of its heave at each sticker's centre: lead, trail, then the extra stickers."""
-    share = _shape_along_chord(scene, bend)
-    centres = [*scene.sticker_centres_uv(), *scene.extra_centres_uv()]
-    return tuple(float(share(np.array([c[0]]))[0]) for c in centres)
-
-
-def mode_heaves_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarray) -> np.ndarray:
-    """Each mode's heave (px, up positive) at each frame, shape (modes, frames): driven by the pitch's acceleration.
-
-    ``Q(s)/Θ(s) = −κ s² / (s² + 2ζω s + ω²)`` per mode, simulated with python-control on a grid
-    20× finer than the frames (the mode's period is a handful of frames), from rest; shape (0,
-    frames) for a rigid blade.
-    """
-    modes = blade_modes_of(preset)
-    if not modes or time_s.size == 0:
-        return np.zeros((len(modes), time_s.size))
-    fine = np.linspace(0.0, float(time_s[-1]), 20 * time_s.size + 1)
-    pitch = preset.servo.response(signal, fine)
-    out = []
-    for hz, z, k, _ in modes:
-        w = 2.0 * math.pi * hz
-        q = control.forced_response(control.tf([-k, 0.0, 0.0], [1.0, 2.0 * z * w, w * w]), fine, pitch - pitch[0])
-        out.append(np.interp(time_s, fine, np.asarray(q.outputs, dtype=float)))
-    return np.array(out)
 
 
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
@@ -494,7 +437,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     camera.save(out / "camera.json")
     write_text_atomic(out / "truth.json", json.dumps(truth, allow_nan=False) + "\n")
     toml_path = out / "campaign.toml"
-    write_text_atomic(toml_path, _campaign_toml(p, scene, tests, fps if p.frames_format is not None else None))
+    twin_campaign(p, scene, tests, toml_path, fps if p.frames_format is not None else None).save(
+        toml_path, header=TWIN_HEADER)
     return toml_path
 
 
@@ -595,40 +539,3 @@ def led_distractors(scene: Scene) -> tuple[Clutter, Clutter]:
 def _shape_truth(scene: Scene, bend: float) -> dict:
     shape = mode_shape(scene, bend)
     return {"lead": shape[0], "trail": shape[1], "extra": list(shape[2:])}
-
-
-def _campaign_toml(p: CampaignPreset, scene: Scene, tests: list[dict], frames_fps: Fraction | None = None) -> str:
-    lines = [
-        "# Simulated campaign written by servoscope.simulate (the true answer is in truth.json).",
-        "[camera]",
-        f"calibration = {_toml_str('camera.json')}",
-        # The shutter time is a camera setting the operator knows; the LED's
-        # partly lit frame gives the input's start only if it is known.
-        *([f"exposure_s = {_toml_float(p.exposure_s)}"] if p.exposure_s > 0 and p.manifest_exposure else []),
-        # Said only when the timestamp is not the exposure's middle (the default).
-        *([f"timestamp = {_toml_str(p.timestamp_at)}"] if p.timestamp_at != TIMESTAMP else []),
-        # Likewise the sensor's readout time (from its data sheet or measured).
-        *([f"readout_s = {_toml_float(p.readout_s)}"] if p.readout_s > 0 else []),
-        "",
-        "[markers]",
-        # Monochrome footage: every marker (and the LED) told by brightness.
-        f"lead = {_toml_str('bright' if p.monochrome else scene.lead_colour)}",
-        f"trail = {_toml_str('bright' if p.monochrome else scene.trail_colour)}",
-        f"led = {_toml_str('bright' if p.monochrome else scene.led_colour)}",
-        *([f"reference = [{_toml_str(REFERENCE_COLOURS[0])}, {_toml_str(REFERENCE_COLOURS[1])}]"]
-          if p.reference_stickers else []),
-        *([f"extra = [{', '.join(_toml_str(c) for c, _ in scene.extra_stickers)}]"] if scene.extra_stickers else []),
-        "",
-        "[input]",
-        f"units = {_toml_str(p.input_units)}",
-    ]
-    for t in tests:
-        frames = t["video"] + (f"/{MRAW_NAME}.cih" if p.frames_format == "mraw" else "/*.tif")
-        source = ([f"frames = {_toml_str(frames)}", f"fps = {_toml_float(float(frames_fps))}"]
-                  + ([f"bits = {p.bit_depth}"] if p.monochrome else [])
-                  if frames_fps is not None else [f"video = {_toml_str(t['video'])}"])
-        lines += ["", "[[tests]]", *source, f"kind = {_toml_str(t['kind'])}"]
-        if t["kind"] == "sine":
-            lines.append(f"frequency_hz = {_toml_float(t['frequency_hz'])}")
-        lines.append(f"amplitude = {_toml_float(t['amplitude'])}")
-    return "\n".join(lines) + "\n"

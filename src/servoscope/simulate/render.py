@@ -18,166 +18,22 @@ about ±4.3 sigma, irrelevant after rounding to 8 bits.
 
 from __future__ import annotations
 
-import functools
-import math
-
 from dataclasses import replace
 
 import cv2
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import scipy.special
-
-from numba import njit
 
 from ..camera.model import CameraModel
 from ..errors import ServoscopeError
 from .coverage import accumulated, composite, composite_rows, polygon_coverage, signed_area
 from .scene import Scene, colour_rgb
+from .render_parts import (add_table_noise, airframe_motion, distort_fast, draw_clutter, gaussian_table, moved_points,
+                           picture_motion, scene_background, viewed_background)
 from .view import ObliqueView, densify_closed
 
-__all__ = ["polygon_coverage", "FrameRenderer", "render_frame"]
-
-
-# -- kernels -------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def _round_clip(v: np.float32) -> np.uint8:
-    # Branch-free clip, then truncation of v + 1/2 (v >= 0) is rounding; the
-    # branchy version is ten times slower on noisy data.
-    v = min(max(v + np.float32(0.5), np.float32(0.0)), np.float32(255.0))
-    return np.uint8(np.int32(v))
-
-
-@njit(cache=True)
-def _finish(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: np.uint64) -> None:
-    """out = clip(round(work + noise), 0, 255) as uint8; noise = scaled_table[random index]."""
-    w = work.ravel()
-    o = out.ravel()
-    n = w.shape[0]
-    s = state
-    golden = np.uint64(0x9E3779B97F4A7C15)
-    m1 = np.uint64(0xBF58476D1CE4E5B9)
-    m2 = np.uint64(0x94D049BB133111EB)
-    mask = np.uint64(0xFFFF)
-    s16 = np.uint64(16)
-    s32 = np.uint64(32)
-    s48 = np.uint64(48)
-    nblocks = (n + 3) // 4
-    for b in range(nblocks):
-        # splitmix64: one 64-bit draw feeds four 16-bit table indices.
-        s = s + golden
-        z = s
-        z = (z ^ (z >> np.uint64(30))) * m1
-        z = (z ^ (z >> np.uint64(27))) * m2
-        z = z ^ (z >> np.uint64(31))
-        k = 4 * b
-        if k + 4 <= n:
-            o[k] = _round_clip(w[k] + scaled_table[np.intp(z & mask)])
-            o[k + 1] = _round_clip(w[k + 1] + scaled_table[np.intp((z >> s16) & mask)])
-            o[k + 2] = _round_clip(w[k + 2] + scaled_table[np.intp((z >> s32) & mask)])
-            o[k + 3] = _round_clip(w[k + 3] + scaled_table[np.intp(z >> s48)])
-        else:
-            for q in range(n - k):
-                o[k + q] = _round_clip(w[k + q] + scaled_table[np.intp((z >> np.uint64(16 * q)) & mask)])
-
-
-# -- public helpers ---------------------------------------------------------------
-def _distort(camera: CameraModel, points_px: np.ndarray) -> np.ndarray:
-    """``camera.distort_points`` in numpy, for the many vertices of a rolling-shutter frame.
-
-    OpenCV's forward model (what ``projectPoints`` computes with no rotation
-    or translation) for up to five coefficients; projectPoints costs ~70 ns a
-    point, which a frame's ~50 000 per-row vertices would turn into 4 ms.
-    Other coefficient counts go to OpenCV.
-    """
-    d = np.asarray(camera.dist_coeffs, dtype=np.float64).ravel()
-    if d.size > 5:
-        return camera.distort_points(points_px)
-    k1, k2, p1, p2, k3 = np.concatenate([d, np.zeros(5 - d.size)])
-    k = camera.camera_matrix
-    x = (points_px[:, 0] - k[0, 2]) / k[0, 0]
-    y = (points_px[:, 1] - k[1, 2]) / k[1, 1]
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    return np.stack([k[0, 0] * xd + k[0, 2], k[1, 1] * yd + k[1, 2]], axis=1)
-
-
-@functools.lru_cache(maxsize=4)
-def _background(scene: Scene) -> np.ndarray:
-    # Campaigns render many videos of one scene: build its background once.
-    bg = scene.background()
-    _draw_clutter(bg, scene, None)
-    bg.flags.writeable = False
-    return bg
-
-
-def picture_motion(scene: Scene, shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
-    """The 2×3 map of the whole recorded picture: a roll about its centre, then a shift (camera motion).
-
-    ``roll_rad`` turns the picture counter-clockwise as seen (y down), the sense in which
-    :func:`servoscope.simulate.scene.marker_angle_rad` counts angles: a rolled camera adds
-    the roll to every angle it sees.
-    """
-    c, s = math.cos(roll_rad), math.sin(roll_rad)
-    cx, cy = 0.5 * (scene.width - 1), 0.5 * (scene.height - 1)
-    return np.array([[c, s, cx - c * cx - s * cy + shift_px[0]],
-                     [-s, c, cy + s * cx - c * cy + shift_px[1]]])
-
-
-def airframe_motion(scene: Scene, rock_rad: float) -> np.ndarray:
-    """The 2×3 map of the airframe rocking on its skids, in the ideal image: a turn by ``rock_rad`` about the
-    point below the pivot at the picture's bottom edge, counter-clockwise positive as angles are counted.
-
-    The blade, its pivot and everything fixed to the airframe (``Clutter.airframe``) turn with it;
-    the rest of the scene stays.
-    """
-    c, s = math.cos(rock_rad), math.sin(rock_rad)
-    cx, cy = scene.pivot_xy_px[0], float(scene.height - 1)
-    return np.array([[c, s, cx - c * cx - s * cy], [-s, c, cy + s * cx - c * cy]])
-
-
-@functools.lru_cache(maxsize=4)
-def _viewed_background(scene: Scene, view: ObliqueView) -> np.ndarray:
-    # The plain background (no clutter) as the oblique camera sees it, once per scene and view.
-    # It is smooth (blotches tenths of the picture wide): a cubic warp by the homography alone
-    # draws it to ~1e-3 DN; the lens's bending of it would not show.
-    plain = np.ascontiguousarray(scene.background())
-    bg = cv2.warpPerspective(plain, view.homography, (scene.width, scene.height), flags=cv2.INTER_CUBIC,
-                             borderMode=cv2.BORDER_REFLECT)
-    bg.flags.writeable = False
-    return bg
-
-
-def _moved(xy: np.ndarray, motion: np.ndarray | None, airframe: np.ndarray | None = None) -> np.ndarray:
-    if airframe is not None:
-        xy = xy @ airframe[:, :2].T + airframe[:, 2]
-    return xy if motion is None else xy @ motion[:, :2].T + motion[:, 2]
-
-
-def _draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, airframe=None, place=None) -> None:
-    """Composite the scene's clutter, moved by the picture's ``motion`` (2×3; the airframe's items first by
-    ``airframe``, a map of recorded points), into ``image`` (float32 RGB). ``place(xy, on_airframe)``, when
-    given, replaces ``airframe``: where an oblique camera records each item (its rocking included)."""
-    for item in scene.clutter:
-        xy = item.outline_px()
-        if place is not None:
-            xy = place(xy, item.airframe)
-        elif item.airframe and airframe is not None:
-            xy = airframe(xy)
-        xy = _moved(xy, motion)
-        acc, x0, y0, sign = accumulated(xy, scene.width, scene.height)
-        if acc.shape[0] > 0 and acc.shape[1] > 1:
-            composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
-
-
-def _gaussian_table() -> np.ndarray:
-    # Midpoint quantiles of 65536 equiprobable bins: an exact-mean, unit-ish
-    # variance discrete Gaussian (variance 1 - 4e-5 from the truncated tails).
-    p = (np.arange(65536) + 0.5) / 65536.0
-    return scipy.special.ndtri(p).astype(np.float64)
+__all__ = ["polygon_coverage", "FrameRenderer", "airframe_motion", "picture_motion", "render_frame"]
 
 
 class FrameRenderer:
@@ -235,11 +91,11 @@ class FrameRenderer:
         self.noise_seed = int(noise_seed)
         # A square-on view is the identity: dropped, so that the square-on code path draws it.
         self.view = view if view is not None and not view.is_square_on else None
-        self._bg = _background(scene) if self.view is None else self._viewed_static()
+        self._bg = scene_background(scene) if self.view is None else self._viewed_static()
         self._work = self._bg.copy()
         self._dirty: list[tuple[int, int, int, int]] = []
         # Noise values pre-scaled to DN; float32 keeps the table in L2 cache.
-        self._noise_table = (_gaussian_table() * self.noise_sigma_dn).astype(np.float32)
+        self._noise_table = (gaussian_table() * self.noise_sigma_dn).astype(np.float32)
         # Blade-frame outlines of everything that moves, in compositing order.
         lead_uv, trail_uv = scene.sticker_centres_uv()
         k = scene.sticker_vertices
@@ -278,8 +134,8 @@ class FrameRenderer:
 
     def _viewed_static(self) -> np.ndarray:
         """The oblique camera's static picture: the warped plain background and the clutter drawn on it."""
-        bg = _viewed_background(replace(self.scene, clutter=()), self.view).copy()
-        _draw_clutter(bg, self.scene, None, place=self._clutter_place(None))
+        bg = viewed_background(replace(self.scene, clutter=()), self.view).copy()
+        draw_clutter(bg, self.scene, None, place=self._clutter_place(None))
         bg.flags.writeable = False
         return bg
 
@@ -296,7 +152,7 @@ class FrameRenderer:
             if camera is not None:
                 xy = camera.undistort_points(densify_closed(xy, step))[0]
             if on_airframe and airframe is not None:
-                xy = _moved(xy, None, airframe)
+                xy = moved_points(xy, None, airframe)
             xy = view.apply(xy)
             return xy if camera is None else camera.distort_points(xy)
         return place
@@ -329,7 +185,7 @@ class FrameRenderer:
             uv = self._all_uv.copy()
             for qj, share in zip(q, self._heave_share):
                 uv[:, 1] += qj if share is None else qj * share
-        xy = _moved(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
+        xy = moved_points(self.scene.to_image(uv, float(pitch_rad)), None, airframe)
         if self._fixed_led:
             xy = np.concatenate([xy, *self._fixed_led], axis=0)
         if self.view is not None:
@@ -346,9 +202,9 @@ class FrameRenderer:
         if airframe is None:
             return None
         if self.camera is None:
-            return lambda xy: _moved(xy, None, airframe)
+            return lambda xy: moved_points(xy, None, airframe)
         camera = self.camera
-        return lambda xy: camera.distort_points(_moved(camera.undistort_points(xy)[0], None, airframe))
+        return lambda xy: camera.distort_points(moved_points(camera.undistort_points(xy)[0], None, airframe))
 
     def _restore_lit(self, gain: np.ndarray | float, motion: np.ndarray | None,
                      airframe: np.ndarray | None = None) -> None:
@@ -364,16 +220,16 @@ class FrameRenderer:
             # sharp edges, which interpolation would not move exactly: it is
             # drawn again, moved, with exact coverage.
             bare = replace(self.scene, clutter=())
-            plain = _background(bare) if self.view is None else _viewed_background(bare, self.view)
+            plain = scene_background(bare) if self.view is None else viewed_background(bare, self.view)
             if motion is None:
                 self._work[:] = plain
             else:
                 self._work[:] = cv2.warpAffine(np.ascontiguousarray(plain), motion, (w, h), flags=cv2.INTER_CUBIC,
                                                borderMode=cv2.BORDER_REFLECT)
             if self.view is None:
-                _draw_clutter(self._work, self.scene, motion, self._airframe_map(airframe))
+                draw_clutter(self._work, self.scene, motion, self._airframe_map(airframe))
             else:
-                _draw_clutter(self._work, self.scene, motion, place=self._clutter_place(airframe))
+                draw_clutter(self._work, self.scene, motion, place=self._clutter_place(airframe))
             self._work *= g
         self._dirty = [(0, h, 0, w)]
 
@@ -426,7 +282,7 @@ class FrameRenderer:
         w, h = self.scene.width, self.scene.height
         outlines = self.outlines_px(pitch_rad, airframe, heave_px)
         if motion is not None:
-            outlines = [_moved(xy, motion) for xy in outlines]
+            outlines = [moved_points(xy, motion) for xy in outlines]
         for xy, colour in zip(outlines, colours):
             acc, x0, y0, sign = accumulated(xy, w, h)
             ny, nx = acc.shape[0], acc.shape[1] - 1
@@ -500,7 +356,7 @@ class FrameRenderer:
             if self.view is not None:
                 xy = self.view.apply(xy)
             if self.camera is not None:
-                xy = _distort(self.camera, xy.reshape(-1, 2)).reshape(xy.shape)
+                xy = distort_fast(self.camera, xy.reshape(-1, 2)).reshape(xy.shape)
             xs = np.ascontiguousarray(xy[..., 0])
             yy = np.ascontiguousarray(xy[..., 1])
             x0 = max(int(np.floor(xs.min() + 0.5)), 0)
@@ -551,7 +407,7 @@ class FrameRenderer:
     def _finished(self, work: np.ndarray, frame_index: int) -> np.ndarray:
         out = np.empty(work.shape, dtype=np.uint8)
         state = np.random.SeedSequence([self.noise_seed, int(frame_index)]).generate_state(1, np.uint64)[0]
-        _finish(work, out, self._noise_table, np.uint64(state))
+        add_table_noise(work, out, self._noise_table, np.uint64(state))
         return out
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,

@@ -21,10 +21,16 @@ Modules, each importing only those below it:
   ``_tf_data``, residuals and minimizer ``_tf_minimize``, ``_tf_metrics``, ``_tf_build``,
   resampling ``_tf_resample``, one order's fit ``_fixed_order``; then ``order`` (select_order)
   and, on top, ``tf_fit`` (fit_transfer_function, whose ``order="auto"`` calls select_order);
-* step tests: ``step`` (analyse_step).
+* step tests: ``step`` (analyse_step); the dead time's two estimates ``dead_time``.
+
+Every fit's parameters are :class:`~servoscope.parameters.Parameter` objects gathered in a
+:class:`~servoscope.parameters.Parameters` (``result.parameters``), and every result offers
+``fit_report()``, ``to_pandas()`` and a notebook table from them (:class:`~servoscope.parameters.FitResult`).
 """
 
+from servoscope.parameters import FitResult, Parameter, Parameters, interval95
 from servoscope.sysid._fixed_order import check_held
+from servoscope.sysid.dead_time import DeadTimeEstimate, dead_time_estimates
 from servoscope.sysid._tf_resample import with_gain_scale_uncertainty
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.linearity import AmplitudeCheck, gain_against_amplitude
@@ -41,8 +47,12 @@ from servoscope.sysid.tf_fit import (
 
 __all__ = [
     "AmplitudeCheck",
+    "DeadTimeEstimate",
+    "FitResult",
     "FrequencyResponse",
     "OrderSelection",
+    "Parameter",
+    "Parameters",
     "SineFit",
     "StepAnalysis",
     "TransferFunctionFit",
@@ -50,12 +60,14 @@ __all__ = [
     "bandwidth_rad_s",
     "check_held",
     "cifer_cost",
+    "dead_time_estimates",
     "estimate_slope_db_per_decade",
     "fit_second_order",
     "fit_sine",
     "fit_transfer_function",
     "gain_against_amplitude",
     "hac_covariance",
+    "interval95",
     "model_step_metrics",
     "rigid_motion_null",
     "select_order",

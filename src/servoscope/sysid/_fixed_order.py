@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from servoscope.errors import ServoscopeError
+from servoscope.parameters import check_held as check_parameters_held
 from servoscope.results import readonly
 from servoscope.sysid._rational import Structure
 from servoscope.sysid._tf_build import build_fit
@@ -60,10 +61,18 @@ def check_held(order: Any, zeros: str, fix: dict[str, float], bounds: dict[str, 
 
 def _held(st: Structure, fix: dict[str, float] | None, bounds: dict[str, tuple[float, float]] | None,
           who: str) -> Structure:
-    """``st`` with ``fix`` and ``bounds`` held (:meth:`Structure.with_held`); a ServoscopeError naming `who` else."""
+    """``st`` with ``fix`` and ``bounds`` held (:meth:`Structure.with_held`); a ServoscopeError naming `who` else.
+
+    The names, limits and a fix against its bounds are checked by
+    :func:`servoscope.parameters.check_held` (every model's one check); a value the parameter's
+    kind cannot take (a frequency ≤ 0) by the structure. A bound on a fixed parameter that
+    holds its value says nothing more, and is dropped.
+    """
+    fix = {k: float(v) for k, v in (fix or {}).items()}
+    bounds = {k: (float(v[0]), float(v[1])) for k, v in (bounds or {}).items()}
+    check_parameters_held(st.names(), fix, bounds, who=f"the model of order ({st.nb}, {st.na})")
     try:
-        return st.with_held({k: float(v) for k, v in (fix or {}).items()},
-                            {k: (float(v[0]), float(v[1])) for k, v in (bounds or {}).items()})
+        return st.with_held(fix, {k: v for k, v in bounds.items() if k not in fix})
     except (ValueError, TypeError, IndexError) as exc:
         raise ServoscopeError(f"{who}: {exc}") from None
 

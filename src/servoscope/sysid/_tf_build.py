@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import t as student_t
 
 from servoscope.errors import ServoscopeError
+from servoscope.parameters import interval95
 from servoscope.results import readonly
 from servoscope.sysid._rational import FREQ_MARGIN, ZETA_RANGE, Structure, log_response, param_words
 from servoscope.sysid._tf_data import FitData, wrap_rad
@@ -24,7 +24,7 @@ from servoscope.sysid._tf_minimize import residual_jacobian, residuals
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.tf_result import TransferFunctionFit
 
-__all__ = ["build_fit", "canonical_in_bounds", "ci95_intervals", "stderr_fields"]
+__all__ = ["build_fit", "canonical_in_bounds", "ci95_intervals"]
 
 
 def canonical_in_bounds(st: Structure, d: FitData, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -34,21 +34,9 @@ def canonical_in_bounds(st: Structure, d: FitData, x: NDArray[np.float64]) -> ND
 
 
 def ci95_intervals(names: Sequence[str], vals: NDArray[np.float64], se: NDArray[np.float64],
-          dof: int) -> dict[str, tuple[float, float]]:
-    """``value ± t(0.975, dof)·stderr`` per parameter (as nlparci)."""
-    tq = float(student_t.ppf(0.975, dof)) if dof > 0 else float("nan")
-    return {n: (float(v - tq * e), float(v + tq * e)) for n, v, e in zip(names, vals, se)}
-
-
-def stderr_fields(st: Structure, stderr: dict[str, float]) -> dict[str, float | None]:
-    """The TransferFunctionFit attributes that repeat ``stderr``'s entries by name (None where absent)."""
-    second = st.na == 2
-    return {
-        "gain_stderr": stderr["gain"],
-        "natural_frequency_stderr_rad_s": stderr["natural_frequency_rad_s"] if second else None,
-        "damping_ratio_stderr": stderr["damping_ratio"] if second else None,
-        "dead_time_stderr_s": stderr["dead_time_s"] if st.delay else None,
-    }
+                   dof: int) -> dict[str, tuple[float, float]]:
+    """``value ± t(0.975, dof)·stderr`` per parameter (as nlparci), by :func:`servoscope.parameters.interval95`."""
+    return {n: interval95(float(v), float(e), "student", dof=dof) for n, v, e in zip(names, vals, se)}
 
 
 def build_fit(
@@ -95,16 +83,9 @@ def build_fit(
     aic = chi2 + 2.0 * p
     bic = chi2 + p * math.log(m)
 
-    second = st.na == 2
-    tau = params.get("dead_time_s") if st.delay else None
     if not all(math.isfinite(v) for v in vals):
         raise ServoscopeError("transfer-function fit failed: non-finite parameters")
     return TransferFunctionFit(
-        gain=params["gain"],
-        natural_frequency_rad_s=params["natural_frequency_rad_s"] if second else None,
-        damping_ratio=params["damping_ratio"] if second else None,
-        dead_time_s=tau,
-        **stderr_fields(st, stderr),
         covariance=readonly(cov),
         residual_rms_db=float(np.sqrt(np.mean(res_db**2))),
         residual_rms_deg=res_deg,

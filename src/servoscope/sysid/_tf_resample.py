@@ -13,8 +13,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from servoscope.defaults import JACKKNIFE_WIDENING_WARNING
+from servoscope.parameters import interval95
 from servoscope.sysid._rational import param_words
-from servoscope.sysid._tf_build import canonical_in_bounds, ci95_intervals, stderr_fields
+from servoscope.sysid._tf_build import canonical_in_bounds, ci95_intervals
 from servoscope.sysid._tf_data import FitData, identifiability_problem
 from servoscope.sysid._tf_minimize import local_fit
 from servoscope.results import readonly
@@ -87,7 +88,6 @@ def with_jackknife(fit: TransferFunctionFit, d: FitData) -> TransferFunctionFit:
         ci95=ci95_intervals(names, vals, se_new, fit.n_residuals - fit.n_params),
         stderr_jackknife={n: float(v) for n, v in zip(names, se_jack)},
         influence=influence,
-        **stderr_fields(st, stderr),
     )
 
 
@@ -161,12 +161,11 @@ def with_gain_scale_uncertainty(fit: TransferFunctionFit, relative_stderr: float
     boot = None
     if fit.ci95_bootstrap is not None and "gain" in fit.ci95_bootstrap:
         lo, hi = fit.ci95_bootstrap["gain"]
-        add = 1.96 * abs(k) * rel
+        add = interval95(0.0, abs(k) * rel, "normal")[1]  # the scale error's own 95 % half width
         boot = {**fit.ci95_bootstrap, "gain": (k - math.hypot(k - lo, add), k + math.hypot(hi - k, add))}
     warns = fit.warnings
     if new > 1.1 * old:
         warns = tuple(dict.fromkeys(warns + (f"the gain's interval includes the angle scale's uncertainty "
                                              f"({100.0 * rel:.2g} %, {reason}): ×{new / old:.1f} wider",)))
-    extra = stderr_fields(fit._structure, stderr) if fit._structure is not None else {"gain_stderr": new}
     return replace(fit, covariance=readonly(cov), stderr=stderr, ci95=ci,
-                   ci95_bootstrap=boot if boot is not None else fit.ci95_bootstrap, warnings=warns, **extra)
+                   ci95_bootstrap=boot if boot is not None else fit.ci95_bootstrap, warnings=warns)

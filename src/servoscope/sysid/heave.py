@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..parameters import FitResult, Parameter, Parameters, interval95
 from ..results import jsonable
 from .hac import hac_covariance
 from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit, ringdown_columns
@@ -138,7 +139,7 @@ def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s
 
 
 @dataclass(frozen=True)
-class HeaveModel:
+class HeaveModel(FitResult):
     """The flapping frequency response fitted: heave over pitch as modes driven by the pitch's acceleration.
 
     ``Q/Θ(jω) = Σⱼ κⱼ·ω² / (ωⱼ² − ω² + 2j·ζⱼ·ωⱼ·ω)`` (``−κ s²`` over each mode's denominator, as
@@ -162,6 +163,28 @@ class HeaveModel:
     modes: tuple[ModeFit, ...]
     chi2_reduced: float
     n_dwells: int
+
+    model_name = "heave/pitch = Σ κ·ω²/(ωm² − ω² + 2j·ζ·ωm·ω) (the blade's flapping modes)"
+
+    @property
+    def parameters(self) -> Parameters:
+        """Each mode's κ (``gain_px_per_rad``, px/rad, normal interval: it has either sign), frequency (Hz)
+        and damping ratio (log-normal intervals, as :attr:`ModeFit.parameters`): the first mode's
+        unnumbered as in :meth:`summary`, the others' names ending ``_2``, ``_3`` …; a mode held at
+        the step's has its frequency and damping ratio fixed (errors NaN).
+        """
+        out = []
+        for j, (kappa, se, m) in enumerate(zip(self.gains_px_per_rad, self.gain_stderrs_px_per_rad, self.modes)):
+            suffix = "" if j == 0 else f"_{j + 1}"
+            out.append(Parameter(f"gain_px_per_rad{suffix}", float(kappa), float(se), interval95(kappa, se, "normal"),
+                                 unit="px/rad"))
+            out += [Parameter(f"{p.name}{suffix}", p.value, p.stderr, p.ci95, vary=p.vary, min=p.min, unit=p.unit,
+                              interval=p.interval) for p in m.parameters.values()]
+        return Parameters(out)
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """Dwells fitted and the fit's reduced χ²."""
+        return {"dwells": int(self.n_dwells), "reduced chi-square": float(self.chi2_reduced)}
 
     @property
     def gain_px_per_rad(self) -> float:

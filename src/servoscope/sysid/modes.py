@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit
 
+from servoscope.parameters import FitResult, Parameter, Parameters, interval95
 from servoscope.results import jsonable
 
 from .hac import hac_covariance
@@ -34,7 +35,6 @@ MIN_SNR = 10.0
 #: mode (quick preset, 480×384): raw −0.01…+0.03 % and +0.7…+1.3 %; H.264 at 20 Mbit/s −0.26 %
 #: and +5 %, each several of the fit's own standard errors.
 MODE_SYSTEMATIC = {"frequency": 0.004, "damping": 0.08}
-_Z95 = 1.959963984540054
 #: Largest damping ratio reported as a mode: a structure that rings for at least a cycle or two
 #: (its amplitude falls by no more than 4x per cycle). A decaying drift of the heave that the
 #: fit can also read as a sinusoid (seen on a rigid blade at 720×576, quick preset seed 3:
@@ -43,8 +43,13 @@ MAX_MODE_DAMPING = 0.2
 
 
 @dataclass(frozen=True)
-class ModeFit:
+class ModeFit(FitResult):
     """One structural mode: frequency, damping ratio, their uncertainties, where it was seen.
+
+    A :class:`~servoscope.parameters.FitResult`: :attr:`parameters` holds ``frequency_hz`` and
+    ``damping_ratio``, each with a log-normal 95 % interval (both are positive, their errors
+    relative: the damping ratio's is 8 % or more, and a symmetric interval would reach below
+    zero), from which ``fit_report()``, ``to_pandas()`` and the notebook's table are made.
 
     Attributes
     ----------
@@ -68,12 +73,30 @@ class ModeFit:
     shape: "ModeShape | None" = None
 
     @property
+    def model_name(self) -> str:  # type: ignore[override]
+        return f"damped mode A·exp(−ζ·2πf·t)·cos(2πf·√(1−ζ²)·t + φ) + c ({self.source})"
+
+    @property
+    def parameters(self) -> Parameters:
+        """``frequency_hz`` (Hz) and ``damping_ratio``, their 95 % intervals log-normal (never below zero).
+
+        A mode held at another's (source ``"held"``) has them fixed, its errors NaN as it has them.
+        """
+        held = self.source == "held"
+        return Parameters(
+            Parameter(name, float(value), float(se), interval95(value, se, "lognormal"), vary=not held, min=0.0,
+                      unit=unit, interval="lognormal")
+            for name, value, se, unit in (("frequency_hz", self.frequency_hz, self.frequency_stderr_hz, "Hz"),
+                                          ("damping_ratio", self.damping_ratio, self.damping_ratio_stderr, "")))
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """Where the mode was seen and its ring-down's amplitude (the signal's units)."""
+        return {"source": self.source, "amplitude": float(self.amplitude)}
+
+    @property
     def ci95(self) -> dict[str, tuple[float, float]]:
-        """95 % intervals (normal, from the standard errors) of ``frequency_hz`` and ``damping_ratio``."""
-        return {"frequency_hz": (self.frequency_hz - _Z95 * self.frequency_stderr_hz,
-                                 self.frequency_hz + _Z95 * self.frequency_stderr_hz),
-                "damping_ratio": (self.damping_ratio - _Z95 * self.damping_ratio_stderr,
-                                  self.damping_ratio + _Z95 * self.damping_ratio_stderr)}
+        """95 % intervals (log-normal, from the standard errors) of ``frequency_hz`` and ``damping_ratio``."""
+        return {name: p.ci95 for name, p in self.parameters.items()}
 
     def summary(self) -> dict[str, Any]:
         """Plain types, for result.json's ``modes``."""

@@ -32,7 +32,9 @@ from __future__ import annotations
 import math
 import warnings as _warnings
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -40,12 +42,14 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..errors import ServoscopeError
-from ..results import import_pandas, jsonable
+from ..parameters import (FitResult, Parameter, Parameters, Tie, check_held, interval95, stderr_of_interval,
+                          unit_of)
+from ..results import jsonable
 from ._tf_metrics import cifer_cost
 from .hac import hac_covariance
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 
-__all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost", "expression_names", "fit_percent", "fit_servo_model",
+__all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost", "fit_percent", "fit_servo_model",
            "linear_starts", "lag1", "measured_noise", "trace_group"]
 
 #: Systematic uncertainty of the linear part from whole traces, added to the fit's: relative for
@@ -56,7 +60,6 @@ __all__ = ["TRACE_SYSTEMATIC", "ServoModelFit", "check_servo_held", "dwell_cost"
 #: all tests (so no jackknife sees them): the tracker's sub-pixel bias, the codec's, the
 #: rendered exposure.
 TRACE_SYSTEMATIC = {"gain": 6e-4, "natural_frequency_rad_s": 1.5e-3, "damping_ratio": 2.5e-3, "dead_time_s": 6e-5}
-_Z95 = 1.959963984540054
 _CHI2_1_95 = 3.841458820694124
 #: Positive parameters, fitted on a log scale.
 _POSITIVE = {"natural_frequency_rad_s", "damping_ratio", *NONLINEAR_PARAMETER.values()}
@@ -73,80 +76,17 @@ def fit_percent(measured: NDArray[np.float64], predicted: NDArray[np.float64]) -
     return 100.0 * (1.0 - float(np.linalg.norm(y - np.asarray(predicted, dtype=float))) / spread)
 
 
-class _Tie:
-    """An lmfit-style constraint expression (asteval: arithmetic and math functions only), parsed once.
-
-    A fit evaluates its ties at every residual: one interpreter and one parse serve them all
-    (a fresh interpreter costs 0.37 ms, a sizeable part of a simulation).
-    """
-
-    def __init__(self, expression: str):
-        from asteval import Interpreter
-
-        self.expression = expression
-        self._interp = Interpreter(minimal=True, use_numpy=False)
-        self._tree = self._interp.parse(expression)  # its syntax was checked by check_servo_held
-
-    def __call__(self, values: dict[str, float]) -> float:
-        interp = self._interp
-        interp.symtable.update(values)
-        value = interp.eval(self._tree, show_errors=False, raise_errors=False)
-        if interp.error or value is None:
-            message = interp.error[0].get_error()[1].strip().splitlines()[-1] if interp.error else "no value"
-            raise ServoscopeError(f"tie {self.expression!r}: {message}")
-        return float(value)
-
-
-def expression_names(expression: str) -> set[str]:
-    """The parameter names an expression uses (asteval's own functions and constants left out)."""
-    from asteval import Interpreter, get_ast_names
-
-    interp = Interpreter(minimal=True, use_numpy=False)
-    try:
-        tree = interp.parse(expression)
-    except SyntaxError as exc:
-        raise ServoscopeError(f"tie {expression!r}: not an expression ({exc.msg or 'syntax error'})") from None
-    if tree is None:
-        raise ServoscopeError(f"tie {expression!r}: not an expression")
-    return {n for n in get_ast_names(tree) if n not in interp.symtable}
-
-
 def check_servo_held(structure: str, fix: dict[str, float] | None,
                      bounds: dict[str, tuple[float, float]] | None, ties: dict[str, str] | None = None) -> None:
-    """Raise ServoscopeError for a held parameter the structure does not have, bounds that exclude a fix, or a tie
-    that names an unknown parameter, another tied one, or a parameter also fixed or bounded."""
+    """Raise ServoscopeError for what `structure`'s model cannot hold (:func:`servoscope.parameters.check_held`)."""
     names = set(LINEAR_PARAMETERS)
     if structure in NONLINEAR_PARAMETER:
         names.add(NONLINEAR_PARAMETER[structure])
-    for name, expression in (ties or {}).items():
-        for used in expression_names(expression):
-            if used not in names:
-                raise ServoscopeError(f"tie {name} = {expression!r}: {_unknown(structure, used, names)}")
-            if used in (ties or {}):
-                raise ServoscopeError(f"tie {name} = {expression!r}: {used} is tied itself; tie to free or fixed "
-                                      "parameters only")
-        if name in (fix or {}) or name in (bounds or {}):
-            raise ServoscopeError(f"{name} is tied ({expression!r}): it cannot also be fixed or bounded")
-    for name in [*(fix or {}), *(bounds or {}), *(ties or {})]:
-        if name not in names:
-            raise ServoscopeError(_unknown(structure, name, names))
-    for name, (lo, hi) in (bounds or {}).items():
-        if not lo < hi:
-            raise ServoscopeError(f"bound on {name}: the lower limit {lo} must be below the upper {hi}")
-        if name in (fix or {}) and not lo <= fix[name] <= hi:
-            raise ServoscopeError(f"{name} is fixed at {fix[name]}, outside its bounds [{lo}, {hi}]")
+    check_held(names, fix, bounds, ties, who=f"the {structure} model")
 
 
-def _unknown(structure: str, name: str, names: set[str]) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(name, sorted(names), n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return f"the {structure} model has no parameter {name!r}{hint}; its parameters: {', '.join(sorted(names))}"
-
-
-@dataclass
-class ServoModelFit:
+@dataclass(frozen=True)
+class ServoModelFit(FitResult):
     """A block-structured model fitted to whole traces (see the module's description).
 
     Attributes
@@ -194,9 +134,30 @@ class ServoModelFit:
     J: float = math.nan
     step_fit_percent: float | None = None
     dwell_fit_percent: float | None = None
-    traces: list[ServoTrace] = field(default_factory=list, repr=False)
-    warnings: list[str] = field(default_factory=list)
+    traces: tuple[ServoTrace, ...] = field(default=(), repr=False)
+    warnings: tuple[str, ...] = ()
     tied: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def model_name(self) -> str:  # type: ignore[override]
+        return f"{self.structure} servo model (time domain, whole traces)"
+
+    @property
+    def parameters(self) -> Parameters:
+        """Every parameter with its error and interval (the log-normal ones never below zero)."""
+        out = []
+        for name, value in self.params.items():
+            kind = interval_kind(self.structure, name, self.tied)
+            out.append(Parameter(name, value, self.stderr.get(name, math.nan), self.ci95.get(name, (math.nan, math.nan)),
+                                 vary=name not in self.fixed, expr=self.tied.get(name), unit=unit_of(name),
+                                 interval="normal" if name in self.fixed else kind))
+        return Parameters(out)
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """Samples, free parameters, χ², AIC, BIC, CIFER's J, the fits on the step and the dwells."""
+        return {"samples": self.n_samples, "free parameters": self.n_free, "chi-square": self.chi2,
+                "AIC": self.aic, "BIC": self.bic, "J": self.J, "step fit (%)": self.step_fit_percent,
+                "dwell fit (%)": self.dwell_fit_percent}
 
     def predict(self, trace: ServoTrace, time_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """The model's angle for ``trace``'s input, on its rest angle when it was fitted (else 0)."""
@@ -257,14 +218,7 @@ class ServoModelFit:
                    {k: num(v) for k, v in (data.get("rest_angle_rad") or {}).items()},
                    {k: num(v) for k, v in data["noise_rad"].items()}, num(data["aic"]), num(data["bic"]),
                    num(data["J"]), data["step_fit_percent"], data["dwell_fit_percent"],
-                   warnings=list(data["warnings"]), tied=dict(data.get("tied") or {}))
-
-    def to_pandas(self) -> Any:
-        """One row per parameter: value, stderr, 95 % interval, held."""
-        pd = import_pandas()
-        return pd.DataFrame([{"parameter": k, "value": v, "stderr": self.stderr.get(k), "ci95_low": self.ci95[k][0],
-                              "ci95_high": self.ci95[k][1], "fixed": k in self.fixed}
-                             for k, v in self.params.items()]).set_index("parameter")
+                   warnings=tuple(data["warnings"]), tied=dict(data.get("tied") or {}))
 
     def plot(self, ax: Any = None) -> list[Any]:
         """Each trace measured (dots) and the model (line), the rest angle taken off, stacked."""
@@ -282,13 +236,6 @@ class ServoModelFit:
         ax.set_title(f"{self.structure} model against the measured traces")
         return lines
 
-    def _repr_html_(self) -> str:
-        rows = "".join(f"<tr><td>{k}</td><td>{v:.6g}</td><td>{self.stderr.get(k, 0):.3g}</td>"
-                       f"<td>{'held' if k in self.fixed else ''}</td></tr>" for k, v in self.params.items())
-        return (f"<b>{self.structure} servo model</b> (J = {self.J:.3g}, step fit "
-                f"{self.step_fit_percent if self.step_fit_percent is not None else float('nan'):.1f} %)"
-                f"<table><tr><th>parameter</th><th>value</th><th>stderr</th><th></th></tr>{rows}</table>")
-
 
 def trace_group(trace: ServoTrace) -> str:
     return "step" if trace.kind == "step" else "dwells"
@@ -300,7 +247,7 @@ class _Problem:
     def __init__(self, traces: list[ServoTrace], structure: str, values: dict[str, float], free: list[str],
                  sigma: dict[str, float], ties: dict[str, str] | None = None):
         self.traces, self.structure, self.values, self.free = traces, structure, dict(values), free
-        self.ties = {name: _Tie(expression) for name, expression in (ties or {}).items()}
+        self.ties = {name: Tie(expression) for name, expression in (ties or {}).items()}
         self.weight = [1.0 / sigma[trace_group(tr)] for tr in traces]
 
     def params(self, x: NDArray[np.float64]) -> dict[str, float]:
@@ -567,12 +514,6 @@ def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: 
     for name in ("gain", "natural_frequency_rad_s", "damping_ratio"):
         if name in problem.free:
             stderr[name] = math.hypot(stderr[name], TRACE_SYSTEMATIC[name] * abs(params[name]))
-    ci95 = {k: (params[k] - _Z95 * stderr[k], params[k] + _Z95 * stderr[k]) for k in names}
-    for name in problem.free:
-        if name in _POSITIVE and stderr[name] > 0:
-            # Log-scale parameters: a log-normal interval (never below 0).
-            f = math.exp(min(_Z95 * stderr[name] / params[name], 50.0))
-            ci95[name] = (params[name] / f, params[name] * f)
     nl = NONLINEAR_PARAMETER.get(structure)
     if problem.ties and problem.free:
         # A tied parameter's error by the delta method, in the free parameters' natural units: their
@@ -591,7 +532,9 @@ def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: 
                 down[free_name] -= h
                 grad[i] = (tie(up) - tie(down)) / (2.0 * h)
             stderr[name] = math.sqrt(max(float(grad @ c_nat @ grad), 0.0))
-            ci95[name] = (params[name] - _Z95 * stderr[name], params[name] + _Z95 * stderr[name])
+    # The quantization step's interval is its profile's (below); a placeholder until then.
+    kinds = {k: interval_kind(structure, k, problem.ties) for k in names}
+    ci95 = {k: interval95(params[k], stderr[k], "normal" if kinds[k] == "profile" else kinds[k]) for k in names}
     if profile is not None:
         order = np.argsort(profile[0])
         grid, cost = np.asarray(profile[0])[order], np.asarray(profile[1])[order]
@@ -607,27 +550,43 @@ def _finish(problem: _Problem, sol: Any, structure: str, names: list[str], fix: 
             hi_k += 1
         lo_k, hi_k = min(lo_k, max(k - 1, 0)), max(hi_k, min(k + 1, grid.size - 1))
         ci95[nl] = (float(grid[lo_k]), float(grid[hi_k]))
-        stderr[nl] = (ci95[nl][1] - ci95[nl][0]) / (2 * _Z95)
+        stderr[nl] = stderr_of_interval(*ci95[nl])
         params[nl] = float(grid[k])
     for name in problem.free:
         lo, hi = bounds.get(name, _DEFAULT_BOUNDS.get(name, (0.0, math.inf)))
         if min(abs(params[name] - lo), abs(params[name] - hi)) <= 1e-6 * max(abs(params[name]), 1e-12):
             warnings.append(f"{structure} model: {name} ended at its limit ({params[name]:.4g}); its interval "
                             "is not a measurement")
-    fit = ServoModelFit(structure, params, stderr, ci95, tuple(k for k in names if k in fix), chi2, n,
-                        len(names) - len(fix) - len(problem.ties) + len(problem.traces), problem.offsets(params),
-                        dict(sigma), traces=list(problem.traces), warnings=warnings,
-                        tied={name: tie.expression for name, tie in problem.ties.items()})
     step = [tr for tr in problem.traces if tr.kind == "step"]
     dwells = [tr for tr in problem.traces if tr.kind == "sine"]
-    if step:
-        fit.step_fit_percent = fit_percent(step[0].angle_rad, fit.predict(step[0]))
-    if dwells:
-        fit.dwell_fit_percent = fit_percent(np.concatenate([tr.angle_rad - fit.offsets[tr.label] for tr in dwells]),
-                                            np.concatenate([fit.predict(tr) - fit.offsets[tr.label] for tr in dwells]))
-    if response:
-        fit.J = dwell_cost(params, structure, problem.traces, response)
-    return fit
+    offsets = problem.offsets(params)
+
+    def predicted(tr: ServoTrace) -> NDArray[np.float64]:
+        return simulate_trace(tr, structure, params) + offsets.get(tr.label, 0.0)
+
+    return ServoModelFit(
+        structure, params, stderr, ci95, tuple(k for k in names if k in fix), chi2, n,
+        len(names) - len(fix) - len(problem.ties) + len(problem.traces), offsets, dict(sigma),
+        J=dwell_cost(params, structure, problem.traces, response) if response else math.nan,
+        step_fit_percent=fit_percent(step[0].angle_rad, predicted(step[0])) if step else None,
+        dwell_fit_percent=(fit_percent(np.concatenate([tr.angle_rad - offsets[tr.label] for tr in dwells]),
+                                       np.concatenate([predicted(tr) - offsets[tr.label] for tr in dwells]))
+                           if dwells else None),
+        traces=tuple(problem.traces), warnings=tuple(warnings),
+        tied={name: tie.expression for name, tie in problem.ties.items()})
+
+
+def interval_kind(structure: str, name: str, tied: Mapping[str, Any] = MappingProxyType({})) -> str:
+    """How a servo model's parameter's 95 % interval is made (:func:`servoscope.parameters.interval95`).
+
+    The quantization step's from its cost profile; a positive parameter fitted on a log scale
+    log-normal (never below zero); a tied one's and the rest normal (delta method, sandwich).
+    """
+    if structure == "quantization" and name == NONLINEAR_PARAMETER["quantization"] and name not in tied:
+        return "profile"
+    if name in _POSITIVE and name not in tied:
+        return "lognormal"
+    return "normal"
 
 
 def lag1(r: NDArray[np.float64]) -> float:

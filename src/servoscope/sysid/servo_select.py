@@ -21,12 +21,13 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..errors import ServoscopeError
+from ..parameters import check_held, interval95, tie_names
 from ..results import import_pandas, jsonable
-from .servo_fit import (ServoModelFit, dwell_cost, expression_names, fit_percent, fit_servo_model,
+from .servo_fit import (ServoModelFit, dwell_cost, fit_percent, fit_servo_model, interval_kind,
                         lag1, linear_starts, measured_noise, trace_group)
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
 
-__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection", "check_held_names",
+__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection",
            "cross_validate", "effect_px", "select_servo_model"]
 
 #: BIC a nonlinear structure must gain over the linear model to be selected.
@@ -37,10 +38,9 @@ BIC_MARGIN = 10.0
 #: seeds 0 and 1): "backlash" of 0.00026 rad won the BIC by 500 while moving the stickers
 #: 0.013–0.016 px RMS; a true play of 0.004 rad moves them 0.23 px.
 MIN_EFFECT_PX = 0.05
-_Z95 = 1.959963984540054
 
 
-@dataclass
+@dataclass(frozen=True)
 class ServoModelSelection:
     """Every structure tried, the one selected, and the cross-validation between the dwells and the step.
 
@@ -65,7 +65,7 @@ class ServoModelSelection:
     selected: ServoModelFit
     scale: float
     cross_validation: dict[str, Any] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
 
     def summary(self) -> dict[str, Any]:
         """Plain types: the selected structure, every candidate's fit, the cross-validation."""
@@ -79,7 +79,7 @@ class ServoModelSelection:
         fits = [ServoModelFit.from_summary(c) for c in data["candidates"]]
         selected = next(f for f in fits if f.structure == data["selected"])
         return cls(fits, selected, float(data["scale"]), dict(data.get("cross_validation") or {}),
-                   list(data.get("warnings") or []))
+                   tuple(data.get("warnings") or ()))
 
     def to_pandas(self) -> Any:
         """One row per candidate structure."""
@@ -94,31 +94,21 @@ class ServoModelSelection:
         return f"<table><tr><th>structure</th><th>BIC</th><th>J</th></tr>{rows}</table>"
 
 
-def _information(fits: list[ServoModelFit]) -> float:
-    """AIC and BIC of each fit, in units of the best fit's residual variance (see the module's description)."""
+def _information(fits: list[ServoModelFit]) -> tuple[list[ServoModelFit], float]:
+    """Each fit with its AIC and BIC, in units of the best fit's residual variance (see the module's
+    description), and that unit."""
     best = min(fits, key=lambda f: f.chi2)
     rho = lag1(np.concatenate([(tr.angle_rad - best.predict(tr)) for tr in best.traces]))
     factor = (1.0 + rho) / (1.0 - rho)
     scale = max(best.chi2 / max(best.n_samples - best.n_free, 1), 1e-12) * factor
     n_eff = max(best.n_samples / factor, 2.0)
-    for f in fits:
-        f.aic = f.chi2 / scale + 2.0 * f.n_free
-        f.bic = f.chi2 / scale + f.n_free * math.log(n_eff)
-    return scale
+    return [replace(f, aic=f.chi2 / scale + 2.0 * f.n_free, bic=f.chi2 / scale + f.n_free * math.log(n_eff))
+            for f in fits], scale
 
 
-def check_held_names(structures, fix: dict, bounds: dict, ties: dict, who: str) -> None:
-    """Raise ServoscopeError for a held, bounded or tied name (or one a tie uses) that none of ``structures``
-    has, with a did-you-mean; ``who`` names the models in the message."""
-    known = {*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in structures if s in NONLINEAR_PARAMETER)}
-    for name in [*fix, *bounds, *ties, *(n for e in ties.values() for n in expression_names(e))]:
-        if name not in known:
-            import difflib
-
-            close = difflib.get_close_matches(name, sorted(known), n=1)
-            raise ServoscopeError(f"no model of {who} has a parameter {name!r}"
-                                  + (f" (did you mean {close[0]!r}?)" if close else "")
-                                  + f"; the parameters: {', '.join(sorted(known))}")
+def _known(structures) -> set[str]:
+    """The parameters of the linear model and of each of ``structures``."""
+    return {*LINEAR_PARAMETERS, *(NONLINEAR_PARAMETER[s] for s in structures if s in NONLINEAR_PARAMETER)}
 
 
 def select_servo_model(traces: list[ServoTrace], structures: tuple[str, ...] | list[str], *,
@@ -159,9 +149,9 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
     def held(structure: str, d: dict) -> dict:
         # A structure's own holds (a tie also needs its expression's names to be the structure's).
         own = set(LINEAR_PARAMETERS) | {NONLINEAR_PARAMETER.get(structure)}
-        return {k: v for k, v in d.items() if k in own and (not isinstance(v, str) or expression_names(v) <= own)}
+        return {k: v for k, v in d.items() if k in own and (not isinstance(v, str) or tie_names(v) <= own)}
 
-    check_held_names(tried, fix, bounds, ties, "the models tried")
+    check_held(_known(tried), fix, bounds, ties, who="the models tried")
     sigma = measured_noise(traces)
     # The linear model from the given start (the frequency-domain fit's) and from a coarse grid, so
     # that a frequency-domain fit gone wrong (a strongly nonlinear servo) does not decide the rest.
@@ -189,7 +179,7 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
         warm = {k: v for k, v in f.params.items() if not (s == "quantization" and k == "quantization_step")}
         fits.append(fit_servo_model(traces, s, start=warm, fix=held(s, fix), bounds=held(s, bounds), ties=held(s, ties),
                                     sigma=sigma, response=response, t0_stderr_s=t0_stderr_s))
-    scale = _information(fits)
+    fits, scale = _information(fits)
     linear = fits[0]
     selected = min(fits[1:], key=lambda f: f.bic, default=linear)
     notes: list[str] = []
@@ -204,10 +194,12 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
             selected = linear
     if len(structures) == 1 and structures[0] != "linear":
         selected = fits[1]  # asked for by name: that structure, the others for comparison
-    _jackknife(traces, selected, sigma, held(selected.structure, fix), held(selected.structure, bounds))
+    widened = _jackknife(traces, selected, sigma, held(selected.structure, fix), held(selected.structure, bounds))
+    fits = [widened if f is selected else f for f in fits]
+    selected = widened
     cv = cross_validate(traces, selected, sigma=sigma, response=response, fix=held(selected.structure, fix),
                         bounds=held(selected.structure, bounds))
-    return ServoModelSelection(fits, selected, scale, cv, notes)
+    return ServoModelSelection(fits, selected, scale, cv, tuple(notes))
 
 
 def effect_px(fit: ServoModelFit, reference: ServoModelFit) -> float:
@@ -226,8 +218,9 @@ def effect_px(fit: ServoModelFit, reference: ServoModelFit) -> float:
     return value if math.isfinite(value) else math.inf
 
 
-def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, float], fix: dict, bounds: dict) -> None:
-    """Widen ``fit``'s errors to the delete-one-test jackknife's where the tests disagree more than they say.
+def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, float], fix: dict,
+               bounds: dict) -> ServoModelFit:
+    """``fit`` with its errors widened to the delete-one-test jackknife's where the tests disagree more than they say.
 
     The sandwich errors describe the noise within each test; a tracking or rendering
     systematic that differs from test to test (a sticker's sub-pixel bias, an exposure not
@@ -236,7 +229,7 @@ def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, fl
     interval is the profile's). Needs at least 4 tests.
     """
     if len(traces) < 4:
-        return
+        return fit
     nl = fit.nonlinear_parameter
     hold = dict(fix)
     if fit.structure == "quantization" and nl is not None:
@@ -249,15 +242,18 @@ def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, fl
             part = fit_servo_model(rest, fit.structure, start=dict(fit.params), fix=hold, bounds=bounds, sigma=sigma,
                                    ties=fit.tied)
         except ServoscopeError:
-            return
+            return fit
         values.append([part.params[k] for k in free])
     v = np.asarray(values)
     n = v.shape[0]
     jack = np.sqrt((n - 1) / n * np.sum((v - v.mean(axis=0)) ** 2, axis=0))
+    stderr, ci95 = dict(fit.stderr), dict(fit.ci95)
     for name, se in zip(free, jack):
-        if se > fit.stderr[name]:
-            fit.stderr[name] = float(se)
-            fit.ci95[name] = (fit.params[name] - _Z95 * se, fit.params[name] + _Z95 * se)
+        if se > stderr[name]:
+            # The interval made as the fit's own was (a positive parameter's log-normal, never below zero).
+            stderr[name] = float(se)
+            ci95[name] = interval95(fit.params[name], se, interval_kind(fit.structure, name, fit.tied))
+    return replace(fit, stderr=stderr, ci95=ci95)
 
 
 def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dict[str, float],

@@ -11,7 +11,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from servoscope.defaults import STEP_DISCERNIBLE_SIGMA
 from servoscope.errors import ServoscopeError
-from servoscope.results import fields_from_summary, html_table, import_pandas, jsonable, readonly
+from servoscope.parameters import FitResult, Parameter, Parameters, interval95
+from servoscope.results import fields_from_summary, import_pandas, jsonable, readonly
 from servoscope.sysid.plotting import new_axes, plot_step
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -40,8 +41,13 @@ def step_discernible(change: float, noise_sigma: float) -> bool:
 
 
 @dataclass(frozen=True)
-class StepAnalysis:
+class StepAnalysis(FitResult):
     """Result of :func:`~servoscope.sysid.analyse_step`.
+
+    A :class:`~servoscope.parameters.FitResult`: :attr:`parameters` holds the model fit's dead
+    time, gain and baseline (empty without a model), :meth:`fit_statistics` the measured
+    metrics, and ``fit_report()`` and the notebook's table show both; :meth:`to_pandas` is the
+    samples (``self.parameters.to_pandas()`` the parameters' table).
 
     Attributes
     ----------
@@ -113,6 +119,43 @@ class StepAnalysis:
     )
     predicted_metrics: dict[str, float] | None = field(default=None, compare=False)
     model_source: str = "frequency-domain model"
+
+    @property
+    def model_name(self) -> str:  # type: ignore[override]
+        if self.dead_time_s is None:
+            return "step response (measured metrics, no model)"
+        return f"step response b + g·step·s(t − t0 − τ), s the {self.model_source}'s unit step"
+
+    @property
+    def parameters(self) -> Parameters:
+        """The model fit's ``dead_time_s`` (s), ``fitted_gain`` and ``fitted_baseline``; empty without a model.
+
+        Every interval is normal (a least-squares fit's covariance; the baseline's error is not
+        kept: NaN). The dead time was fitted within ``[0, …]`` and is never negative: its
+        interval stops at 0 (the fit's bound) where a step's dead time is within errors of none.
+        """
+        if self.dead_time_s is None:
+            return Parameters()
+        dead, dead_se = float(self.dead_time_s), _num(self.dead_time_stderr_s)
+        lo, hi = interval95(dead, dead_se, "normal")
+        gain, gain_se = _num(self.fitted_gain), _num(self.fitted_gain_stderr)
+        return Parameters([
+            Parameter("dead_time_s", dead, dead_se, (max(lo, 0.0), hi), min=0.0, unit="s"),
+            Parameter.estimated("fitted_gain", gain, gain_se),
+            Parameter("fitted_baseline", _num(self.fitted_baseline))])
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """The measured metrics (the model's own, where there is one, prefixed ``model``), samples and noise."""
+        out: dict[str, Any] = {
+            "samples": int(np.size(self.time_s)), "t0_s": float(self.t0_s), "step_size": float(self.step_size),
+            "initial_value": float(self.initial_value), "final_value": float(self.final_value),
+            "gain": float(self.gain), "rise_time_s": float(self.rise_time_s),
+            "overshoot_pct": float(self.overshoot_pct), "peak_time_s": float(self.peak_time_s),
+            "settling_time_s": float(self.settling_time_s), "dead_time_threshold_s": float(self.dead_time_threshold_s),
+            "noise_sigma": float(self.noise_sigma)}
+        for k, v in (self.predicted_metrics or {}).items():
+            out[f"model {k}"] = float(v)
+        return out
 
     def predicted(self, time_s: ArrayLike) -> NDArray[np.float64]:
         """Model prediction ``b + g*step_size*s(t - t0 - tau)`` at `time_s`.
@@ -215,7 +258,10 @@ class StepAnalysis:
         )
 
     def to_pandas(self) -> Any:
-        """Samples (and model prediction if any) as a DataFrame. Needs pandas."""
+        """Samples (and model prediction if any) as a DataFrame. Needs pandas.
+
+        The parameters' table (one row each) is ``self.parameters.to_pandas()``.
+        """
         pd = import_pandas()
         data: dict[str, Any] = {"time_s": np.asarray(self.time_s), "y": np.asarray(self.y)}
         if self._unit_step is not None:
@@ -235,5 +281,7 @@ class StepAnalysis:
         predicted = self.predicted(self.time_s) if self._unit_step is not None else None
         return plot_step(new_axes(ax), self.time_s, self.y, predicted, t0_s=self.t0_s, dead_time_s=self.dead_time_s)
 
-    def _repr_html_(self) -> str:
-        return html_table(self.summary(), "StepAnalysis")
+
+def _num(value: float | None) -> float:
+    """NaN for None (a number not estimated)."""
+    return float("nan") if value is None else float(value)

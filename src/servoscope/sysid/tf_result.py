@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from servoscope.errors import ServoscopeError
+from servoscope.parameters import FitResult, Parameter, Parameters, unit_of
 from servoscope.results import fields_from_summary, html_rows, import_pandas, jsonable, readonly
 from servoscope.sysid._rational import Structure, continuous_phase_rad, log_response
 from servoscope.sysid._tf_metrics import bandwidth_rad_s, j_rating
@@ -37,7 +38,7 @@ ORDER_TABLE_KEYS = (
 
 
 @dataclass(frozen=True)
-class TransferFunctionFit:
+class TransferFunctionFit(FitResult):
     """Transfer function ``K * N(s)/D(s) * exp(-s*tau)`` fitted to a frequency response.
 
     Attributes
@@ -120,14 +121,6 @@ class TransferFunctionFit:
         − value) / stated stderr}``.
     """
 
-    gain: float
-    natural_frequency_rad_s: float | None
-    damping_ratio: float | None
-    gain_stderr: float
-    natural_frequency_stderr_rad_s: float | None
-    damping_ratio_stderr: float | None
-    dead_time_s: float | None
-    dead_time_stderr_s: float | None
     covariance: NDArray[np.float64] = field(repr=False, compare=False)
     residual_rms_db: float = float("nan")
     residual_rms_deg: float | None = None
@@ -139,8 +132,8 @@ class TransferFunctionFit:
     order: tuple[int, int] = (0, 2)
     zeros: str = "minimum_phase"
     param_names: tuple[str, ...] = ()
-    params: dict[str, float] = field(default_factory=dict, repr=False)
-    stderr: dict[str, float] = field(default_factory=dict, repr=False)
+    params: dict[str, float] = field(default_factory=dict)
+    stderr: dict[str, float] = field(default_factory=dict)
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict, repr=False)
     ci95_bootstrap: dict[str, tuple[float, float]] | None = field(default=None, repr=False)
     bootstrap_samples: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
@@ -157,6 +150,89 @@ class TransferFunctionFit:
     held: dict[str, dict[str, Any]] = field(default_factory=dict, repr=False)
     _structure: Structure | None = field(default=None, repr=False, compare=False)
     _theta: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
+
+    # ------------------------------------------------ named parameters
+    # K, ωn, ζ and τ by name: read from `params`/`stderr`, their one home (they were stored twice).
+    def _second(self, name: str, table: dict[str, float]) -> float | None:
+        return table.get(name) if self.order[1] == 2 else None
+
+    @property
+    def gain(self) -> float:
+        """Static gain ``K = G(0)`` (output units per input unit, e.g. rad per unit)."""
+        return self.params["gain"]
+
+    @property
+    def gain_stderr(self) -> float:
+        """Standard error of :attr:`gain` (NaN when not estimable)."""
+        return self.stderr["gain"]
+
+    @property
+    def natural_frequency_rad_s(self) -> float | None:
+        """``ωn`` (rad/s) of a second-order denominator; None for other orders (see `params`)."""
+        return self._second("natural_frequency_rad_s", self.params)
+
+    @property
+    def natural_frequency_stderr_rad_s(self) -> float | None:
+        """Standard error of :attr:`natural_frequency_rad_s` (None for other orders)."""
+        return self._second("natural_frequency_rad_s", self.stderr)
+
+    @property
+    def damping_ratio(self) -> float | None:
+        """``ζ`` of a second-order denominator; None for other orders."""
+        return self._second("damping_ratio", self.params)
+
+    @property
+    def damping_ratio_stderr(self) -> float | None:
+        """Standard error of :attr:`damping_ratio` (None for other orders)."""
+        return self._second("damping_ratio", self.stderr)
+
+    @property
+    def dead_time_s(self) -> float | None:
+        """Dead time ``τ`` in s (a complex fit's; None for a magnitude fit, which cannot identify it)."""
+        return self.params.get("dead_time_s")
+
+    @property
+    def dead_time_stderr_s(self) -> float | None:
+        """Standard error of :attr:`dead_time_s`, s."""
+        return self.stderr.get("dead_time_s")
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of the fit: residuals less free parameters."""
+        return self.n_residuals - self.n_params
+
+    @property
+    def model_name(self) -> str:  # type: ignore[override]
+        return f"transfer function of order {tuple(self.order)}, {self.mode} fit"
+
+    @property
+    def parameters(self) -> Parameters:
+        """Every parameter with its error and its Student-t 95 % interval (as MATLAB's ``nlparci``)."""
+        names = list(self.param_names or self.params)
+        cov = np.asarray(self.covariance, dtype=float)
+        correlation = None
+        free = [n for n in names if "fixed" not in self.held.get(n, {})]
+        if cov.shape == (len(names), len(names)) and len(free) > 1:
+            idx = [names.index(n) for n in free]
+            c = cov[np.ix_(idx, idx)]
+            d = np.sqrt(np.clip(np.diag(c), 0.0, None))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                correlation = c / np.outer(d, d)
+        out = []
+        for name in names:
+            held = self.held.get(name, {})
+            lo, hi = held.get("bounds", (-math.inf, math.inf))
+            out.append(Parameter(name, self.params[name], self.stderr.get(name, math.nan),
+                                 self.ci95.get(name, (math.nan, math.nan)), vary="fixed" not in held, min=lo, max=hi,
+                                 unit=unit_of(name), interval="student", dof=float(self.dof)))
+        return Parameters(out, correlation=correlation, correlated=free if correlation is not None else ())
+
+    def fit_statistics(self) -> dict[str, Any]:
+        """Points, parameters, residuals, degrees of freedom, CIFER's J, AIC, BIC, the residuals' RMS."""
+        return {"points": self.n_points, "free parameters": self.n_params, "residuals": self.n_residuals,
+                "degrees of freedom": self.dof, "J": self.J, "J rating": self.J_rating, "AIC": self.aic,
+                "BIC": self.bic, "residual RMS (dB)": self.residual_rms_db,
+                "residual RMS (deg)": self.residual_rms_deg}
 
     # -------------------------------------------------------------- model
     @property
@@ -399,19 +475,6 @@ class TransferFunctionFit:
         if phase_ax is not None:
             artists.append(plot_model_phase(phase_ax, w, self.phase_deg(w)))
         return artists
-
-    def _repr_html_(self) -> str:
-        rows = []
-        for name in self.param_names:
-            lo, hi = self.ci95.get(name, (float("nan"), float("nan")))
-            rows.append([name, f"{self.params[name]:.6g}", f"{self.stderr[name]:.3g}", f"[{lo:.6g}, {hi:.6g}]"])
-        fit = (
-            f"order {self.order}, {self.mode} fit, J = {self.J:.3g} ({self.J_rating}), "
-            f"AIC = {self.aic:.4g}, BIC = {self.bic:.4g}, {self.n_points} points"
-        )
-        warn = "".join(f"<li>{w}</li>" for w in self.warnings)
-        table = html_rows(("parameter", "value", "std. error", "95 % interval"), rows, f"TransferFunctionFit: {fit}")
-        return table + (f"<ul>{warn}</ul>" if warn else "")
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from ..camera.plane_fit import apply_homography
 from ..camera.plane_map import undistort_jacobian
 from ..defaults import OBLIQUE_GAIN_WARNING, OBLIQUE_VIEW_WARNING_DEG
 from ..errors import ServoscopeError
-from .track import Track
+from ..markers.track import Track
 
 __all__ = ["SELF_CALIBRATED", "pooled_view", "sticker_observations", "told_view", "view_warning",
            "with_view_correction"]

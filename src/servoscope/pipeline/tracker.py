@@ -1,4 +1,8 @@
-"""Tracking two coloured markers (and a status LED) through a video.
+"""Tracking two coloured markers (and a status LED) through a video: the stages run together.
+
+In the pipeline layer (:mod:`servoscope.pipeline`): a markers engine measures the
+stickers' pixel centroids, then the camera stage and the angle stage make the
+angles (:func:`_finish` writes the order out).
 
 The first frame's blobs of each marker's colour are scored and the best
 pair taken, or the blobs the user pinned (:mod:`servoscope.markers.selection`).
@@ -32,25 +36,26 @@ import numpy as np
 
 from ..angle.geometry import angle_rad_from_centroids, blade_angle
 from ..angle.rigid import rigid_motion
-from ..camera.plane_map import centroids_in_plane, plane_camera
+from ..angle.rigid_check import flag_nonrigid
+from ..camera.plane_map import area_scale_map, centroids_in_plane, plane_camera
 from ..camera.rolling_shutter import angle_sample_times, check_readout
 from ..camera.undistort import undistort_centroids
 from ..defaults import TIMESTAMPS
 from ..errors import ServoscopeError
+from ..markers.colour import AUTO, BRIGHTNESS, ColourModel, parse_colour
+from ..markers.frame_checks import flag_repeated
+from ..markers.frame_record import EngineInput, TrackLog
+from ..markers.led_level import input_start
+from ..markers.led_search import led_input_start
+from ..markers.led_timing import exposure_middle_offset_s, frame_period_s
+from ..markers.marker_state import MarkerTracker
+from ..markers.mono_engine import run_mono
+from ..markers.rgb_engine import run_rgb
+from ..markers.settings import BACKENDS, ENGINES, TrackerSettings, extra_marker_problems, resolve_engine
+from ..markers.timebase import frame_timing
+from ..markers.track import Track
+from ..markers.yuv_engine import run_yuv
 from ..video.reader import VideoInfo, probe_video, thread_budget
-from .colour import AUTO, BRIGHTNESS, ColourModel, parse_colour
-from .frame_checks import flag_nonrigid, flag_repeated
-from .frame_record import EngineInput, TrackLog
-from .led_level import input_start
-from .led_search import led_input_start
-from .led_timing import exposure_middle_offset_s, frame_period_s
-from .marker_state import MarkerTracker
-from .mono_engine import run_mono
-from .rgb_engine import run_rgb
-from .settings import BACKENDS, ENGINES, TrackerSettings, extra_marker_problems, resolve_engine
-from .timebase import frame_timing
-from .track import Track
-from .yuv_engine import run_yuv
 
 __all__ = ["TrackerSettings", "Track", "track_video", "angle_rad_from_centroids", "resolve_engine", "ENGINES", "BACKENDS"]
 
@@ -111,8 +116,11 @@ def track_video(
         # Before any work: the container's nominal frame (or field) interval.
         _check_exposure(path, settings, np.arange(2) / (info.frame_rate_hz * (2 if fields is not None else 1)))
     engine = resolve_engine(settings)
-    lead = MarkerTracker("lead", lead_spec, settings)
-    trail = MarkerTracker("trail", trail_spec, settings)
+    # An oblique view (a plane given) makes a sticker bigger where the plane is nearer: the camera
+    # stage's map of it, for the markers to compare their areas at the picture's centre's scale.
+    area_scale = area_scale_map(settings.plane, settings.camera)
+    lead = MarkerTracker("lead", lead_spec, settings, area_scale=area_scale)
+    trail = MarkerTracker("trail", trail_spec, settings, area_scale=area_scale)
     _check_monochrome(path, info, (lead_spec, trail_spec))
     # A brightness LED's model comes from the first frame, as brightness markers' do.
     led_model = (ColourModel.from_seed(led_spec) if led_spec is not None and led_spec not in BRIGHTNESS

@@ -4,7 +4,7 @@ To check tracking by eye: each frame shows both centroids (a cross and a
 circle of the marker's size), the line joining them, and the angle; a frame
 the tracker rejected carries a red ``invalid: <reason>`` label instead.
 
-Centroids in a :class:`~servoscope.markers.tracker.Track` are in the ideal
+Centroids in a :class:`~servoscope.markers.track.Track` are in the ideal
 (undistorted) image when the track was made with a camera model; pass the
 same camera here and they are mapped back through the lens
 (:meth:`CameraModel.distort_points`) so that they land on the stickers in the
@@ -23,8 +23,8 @@ import numpy as np
 from ..camera.model import CameraModel
 from ..camera.plane_map import recorded_points
 from ..errors import ServoscopeError
-from .reader import iter_frames, probe_video
-from .writer import VideoWriter, container_suffixes
+from ..video.reader import iter_frames, probe_video
+from ..video.writer import VideoWriter, container_suffixes
 from .._io import atomic_path
 
 __all__ = ["write_overlay", "annotate_frame", "overlay_bit_rate"]

@@ -1,0 +1,170 @@
+"""The frame renderer's parts below :class:`~servoscope.simulate.render.FrameRenderer`: the noise kernel,
+the lens's fast distortion, the backgrounds, the picture's and the airframe's motions, the clutter.
+
+The sensor noise is a splitmix64 stream (in numba) mapped through an inverse-CDF table of
+65536 Gaussian quantiles (:func:`gaussian_table`); see :mod:`servoscope.simulate.render`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import cv2
+import numpy as np
+import scipy.special
+from numba import njit
+
+from ..camera.model import CameraModel
+from .coverage import accumulated, composite
+from .scene import Scene, colour_rgb
+from .view import ObliqueView
+
+__all__ = ["add_table_noise", "airframe_motion", "distort_fast", "draw_clutter", "gaussian_table", "moved_points",
+           "picture_motion", "scene_background", "viewed_background"]
+
+
+# -- kernels -------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _round_clip(v: np.float32) -> np.uint8:
+    # Branch-free clip, then truncation of v + 1/2 (v >= 0) is rounding; the
+    # branchy version is ten times slower on noisy data.
+    v = min(max(v + np.float32(0.5), np.float32(0.0)), np.float32(255.0))
+    return np.uint8(np.int32(v))
+
+
+@njit(cache=True)
+def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: np.uint64) -> None:
+    """out = clip(round(work + noise), 0, 255) as uint8; noise = scaled_table[random index]."""
+    w = work.ravel()
+    o = out.ravel()
+    n = w.shape[0]
+    s = state
+    golden = np.uint64(0x9E3779B97F4A7C15)
+    m1 = np.uint64(0xBF58476D1CE4E5B9)
+    m2 = np.uint64(0x94D049BB133111EB)
+    mask = np.uint64(0xFFFF)
+    s16 = np.uint64(16)
+    s32 = np.uint64(32)
+    s48 = np.uint64(48)
+    nblocks = (n + 3) // 4
+    for b in range(nblocks):
+        # splitmix64: one 64-bit draw feeds four 16-bit table indices.
+        s = s + golden
+        z = s
+        z = (z ^ (z >> np.uint64(30))) * m1
+        z = (z ^ (z >> np.uint64(27))) * m2
+        z = z ^ (z >> np.uint64(31))
+        k = 4 * b
+        if k + 4 <= n:
+            o[k] = _round_clip(w[k] + scaled_table[np.intp(z & mask)])
+            o[k + 1] = _round_clip(w[k + 1] + scaled_table[np.intp((z >> s16) & mask)])
+            o[k + 2] = _round_clip(w[k + 2] + scaled_table[np.intp((z >> s32) & mask)])
+            o[k + 3] = _round_clip(w[k + 3] + scaled_table[np.intp(z >> s48)])
+        else:
+            for q in range(n - k):
+                o[k + q] = _round_clip(w[k + q] + scaled_table[np.intp((z >> np.uint64(16 * q)) & mask)])
+
+
+# -- pictures ---------------------------------------------------------------------
+def distort_fast(camera: CameraModel, points_px: np.ndarray) -> np.ndarray:
+    """``camera.distort_points`` in numpy, for the many vertices of a rolling-shutter frame.
+
+    OpenCV's forward model (what ``projectPoints`` computes with no rotation
+    or translation) for up to five coefficients; projectPoints costs ~70 ns a
+    point, which a frame's ~50 000 per-row vertices would turn into 4 ms.
+    Other coefficient counts go to OpenCV.
+    """
+    d = np.asarray(camera.dist_coeffs, dtype=np.float64).ravel()
+    if d.size > 5:
+        return camera.distort_points(points_px)
+    k1, k2, p1, p2, k3 = np.concatenate([d, np.zeros(5 - d.size)])
+    k = camera.camera_matrix
+    x = (points_px[:, 0] - k[0, 2]) / k[0, 0]
+    y = (points_px[:, 1] - k[1, 2]) / k[1, 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([k[0, 0] * xd + k[0, 2], k[1, 1] * yd + k[1, 2]], axis=1)
+
+
+@functools.lru_cache(maxsize=4)
+def scene_background(scene: Scene) -> np.ndarray:
+    """The scene's background with its clutter, read-only, cached (campaigns render many videos of one scene)."""
+    # Campaigns render many videos of one scene: build its background once.
+    bg = scene.background()
+    draw_clutter(bg, scene, None)
+    bg.flags.writeable = False
+    return bg
+
+
+def picture_motion(scene: Scene, shift_px: tuple[float, float] = (0.0, 0.0), roll_rad: float = 0.0) -> np.ndarray:
+    """The 2×3 map of the whole recorded picture: a roll about its centre, then a shift (camera motion).
+
+    ``roll_rad`` turns the picture counter-clockwise as seen (y down), the sense in which
+    :func:`servoscope.simulate.scene.marker_angle_rad` counts angles: a rolled camera adds
+    the roll to every angle it sees.
+    """
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    cx, cy = 0.5 * (scene.width - 1), 0.5 * (scene.height - 1)
+    return np.array([[c, s, cx - c * cx - s * cy + shift_px[0]],
+                     [-s, c, cy + s * cx - c * cy + shift_px[1]]])
+
+
+def airframe_motion(scene: Scene, rock_rad: float) -> np.ndarray:
+    """The 2×3 map of the airframe rocking on its skids, in the ideal image: a turn by ``rock_rad`` about the
+    point below the pivot at the picture's bottom edge, counter-clockwise positive as angles are counted.
+
+    The blade, its pivot and everything fixed to the airframe (``Clutter.airframe``) turn with it;
+    the rest of the scene stays.
+    """
+    c, s = math.cos(rock_rad), math.sin(rock_rad)
+    cx, cy = scene.pivot_xy_px[0], float(scene.height - 1)
+    return np.array([[c, s, cx - c * cx - s * cy], [-s, c, cy + s * cx - c * cy]])
+
+
+@functools.lru_cache(maxsize=4)
+def viewed_background(scene: Scene, view: ObliqueView) -> np.ndarray:
+    """The scene's plain background (no clutter) as an oblique camera sees it, read-only, cached."""
+    # The plain background (no clutter) as the oblique camera sees it, once per scene and view.
+    # It is smooth (blotches tenths of the picture wide): a cubic warp by the homography alone
+    # draws it to ~1e-3 DN; the lens's bending of it would not show.
+    plain = np.ascontiguousarray(scene.background())
+    bg = cv2.warpPerspective(plain, view.homography, (scene.width, scene.height), flags=cv2.INTER_CUBIC,
+                             borderMode=cv2.BORDER_REFLECT)
+    bg.flags.writeable = False
+    return bg
+
+
+def moved_points(xy: np.ndarray, motion: np.ndarray | None, airframe: np.ndarray | None = None) -> np.ndarray:
+    """Points (n, 2) moved by ``airframe`` (2×3, first) and then by the picture's ``motion`` (2×3); None: not moved."""
+    if airframe is not None:
+        xy = xy @ airframe[:, :2].T + airframe[:, 2]
+    return xy if motion is None else xy @ motion[:, :2].T + motion[:, 2]
+
+
+def draw_clutter(image: np.ndarray, scene: Scene, motion: np.ndarray | None, airframe=None, place=None) -> None:
+    """Composite the scene's clutter, moved by the picture's ``motion`` (2×3; the airframe's items first by
+    ``airframe``, a map of recorded points), into ``image`` (float32 RGB). ``place(xy, on_airframe)``, when
+    given, replaces ``airframe``: where an oblique camera records each item (its rocking included)."""
+    for item in scene.clutter:
+        xy = item.outline_px()
+        if place is not None:
+            xy = place(xy, item.airframe)
+        elif item.airframe and airframe is not None:
+            xy = airframe(xy)
+        xy = moved_points(xy, motion)
+        acc, x0, y0, sign = accumulated(xy, scene.width, scene.height)
+        if acc.shape[0] > 0 and acc.shape[1] > 1:
+            composite(image, acc, x0, y0, colour_rgb(item.colour), sign)
+
+
+def gaussian_table() -> np.ndarray:
+    """65536 equiprobable Gaussian quantiles, the sensor noise's inverse-CDF table (unit σ)."""
+    # Midpoint quantiles of 65536 equiprobable bins: an exact-mean, unit-ish
+    # variance discrete Gaussian (variance 1 - 4e-5 from the truncated tails).
+    p = (np.arange(65536) + 0.5) / 65536.0
+    return scipy.special.ndtri(p).astype(np.float64)
+
+
