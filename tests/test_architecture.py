@@ -188,8 +188,9 @@ STAGE_RANK: dict[str, int] = {
     "errors": 0,
     "results": 1,
     "defaults": 1,
+    "numbers": 1,  # a value shown to its uncertainty's precision: every view's numbers
     "_io": 2,
-    "parameters": 2,
+    "parameters": 2,  # above numbers: a parameter written as text
     # the stages
     "video": 3,
     "markers": 4,

@@ -22,11 +22,11 @@ def print_model(result, truth: dict | None = None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from .sysid.model_text import PARAM_LABELS, model_equation
-    from .report.numbers import format_interval, format_with_uncertainty
+    from .numbers import format_interval, format_with_uncertainty
 
-    m = result.model
-    table = Table(title=model_equation(m, result.dead_time_s))
+    head = result.headline
+    title = head.equation if head.domain == "frequency domain" else f"{head.equation} ({head.domain}, selected)"
+    table = Table(title=title)
     table.add_column("quantity")
     table.add_column("identified", justify="right")
     table.add_column("± std. error", justify="right")
@@ -35,43 +35,35 @@ def print_model(result, truth: dict | None = None) -> None:
         table.add_column("truth", justify="right")
         table.add_column("error", justify="right")
     truth_model = (truth or {}).get("model", {})
-    rows = []
-    for name in m.param_names:
-        if name == "dead_time_s":
-            continue  # shown below, with the step test's estimate
-        ci = m.ci95.get(name)
-        rows.append((name, m.params.get(name), m.stderr.get(name), ci, truth_model.get(name), "rel"))
-    rows.append(("−3 dB bandwidth (rad/s)", m.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"), "rel"))
-    dead = result.dead_time_s
-    dead_ms = None if dead is None else 1e3 * dead
-    dead_err_s = result.dead_time_stderr_s
-    dead_err = None if dead_err_s is None else 1e3 * dead_err_s
+    # The headline's own cells (Parameter.cells): the numbers the report and the notebook show.
+    for (name, p), cells in zip(head.parameters.items(), head.rows()):
+        true = truth_model.get(name)
+        if truth is not None:
+            diff = "—" if true is None else (f"{1e3 * (p.value - true):+.2f} ms" if name == "dead_time_s"
+                                             else f"{100 * (p.value - true) / true:+.2f} %")
+            cells = cells + [fmt(true), diff]
+        table.add_row(*cells)
+    rows = [("−3 dB bandwidth (rad/s)", result.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"))]
     true_dead = truth_model.get("dead_time_s")
-    estimates = result.dead_time_estimates
-    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
-    dead_ci = None if chosen is None else [1e3 * v for v in estimates[chosen]["ci95_s"]]
     short = {"step": "step test", "phase": "dwells' phases"}
-    rows.append((f"dead time (ms), {short.get(chosen or '', 'not measured')}", dead_ms, dead_err, dead_ci,
-                 None if true_dead is None else 1e3 * true_dead, "abs"))
-    other = {"step": "phase", "phase": "step"}.get(chosen or "")
-    if other and estimates.get(other) is not None:
-        e = estimates[other]
-        rows.append((f"  other estimate: {short[other]}",
-                     1e3 * e["value_s"], 1e3 * e["stderr_s"], [1e3 * v for v in e["ci95_s"]],
-                     None if true_dead is None else 1e3 * true_dead, "abs"))
-    for name, value, err, ci, true, kind in rows:
+    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
+    for key, e in result.dead_time_estimates.items():
+        if e is not None and key != chosen:
+            rows.append((f"  other dead-time estimate (ms): {short[key]}", 1e3 * e.value_s, 1e3 * e.stderr_s,
+                         [1e3 * v for v in e.ci95_s], None if true_dead is None else 1e3 * true_dead))
+    for name, value, err, ci, true in rows:
         value_text, err_text = format_with_uncertainty(value, err)
         if err is None:
             value_text = fmt(value)
-        cells = [PARAM_LABELS.get(name, name), value_text, err_text if err is not None else "—",
+        cells = [name, value_text, err_text if err is not None else "—",
                  "—" if ci is None else format_interval(ci[0], ci[1], err)]
         if truth is not None:
             if value is None or true is None:
                 diff = "—"
-            elif kind == "rel":
-                diff = f"{100 * (value - true) / true:+.2f} %"
-            else:
+            elif "(ms)" in name:
                 diff = f"{value - true:+.2f} ms"
+            else:
+                diff = f"{100 * (value - true) / true:+.2f} %"
             cells += [fmt(true), diff]
         table.add_row(*cells)
     Console(highlight=False, width=112).print(table)
@@ -95,8 +87,6 @@ def print_servo_model(result, truth: dict | None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from .report.numbers import format_interval, format_with_uncertainty
-
     sel = result.servo_model.selected
     table = Table(title=f"time-domain models (dwells and step together): {sel.structure} selected")
     for col in ("structure", "BIC", "CIFER J (dwells)", "step fit"):
@@ -108,12 +98,8 @@ def print_servo_model(result, truth: dict | None) -> None:
     for col in ("parameter", "identified", "± std. error", "95 % interval", *(("truth",) if truth else ())):
         params.add_column(col, justify="right")
     true = (truth or {}).get("model", {})
-    for name, value in sel.params.items():
-        v, e = format_with_uncertainty(value, sel.stderr.get(name))
-        lo, hi = sel.ci95[name]
-        held = " (held)" if name in sel.fixed else f" (= {sel.tied[name]})" if name in sel.tied else ""
-        params.add_row(name + held, v, e, format_interval(lo, hi, sel.stderr[name]),
-                       *((fmt(true.get(name)),) if truth else ()))
+    for name, p in sel.parameters.items():
+        params.add_row(name + p.held_text(), *p.cells(), *((fmt(true.get(name)),) if truth else ()))
     console = Console(highlight=False, width=112)
     console.print(table)
     console.print(params)
@@ -125,7 +111,7 @@ def print_blade_motions(result, truth: dict | None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from .report.numbers import format_interval, format_with_uncertainty
+    from .numbers import format_interval, format_with_uncertainty
 
     true = ((truth or {}).get("modes") or [{}])[0]
     table = Table(title="the blade's modes (its heave across the chord)")

@@ -44,6 +44,7 @@ from scipy.stats import norm
 from scipy.stats import t as student_t
 
 from .errors import ServoscopeError
+from .numbers import format_interval, format_value, format_with_uncertainty
 from .results import html_rows, import_pandas, jsonable
 
 __all__ = ["INTERVAL_KINDS", "FitResult", "Parameter", "Parameters", "check_held", "interval95", "stderr_of_interval",
@@ -193,6 +194,28 @@ class Parameter:
     def relative_stderr(self) -> float:
         """``stderr/|value|`` (NaN at zero)."""
         return self.stderr / abs(self.value) if self.value else math.nan
+
+    def cells(self) -> tuple[str, str, str]:
+        """The value, its standard error and its 95 % interval as every view writes them.
+
+        The value rounded where the error's second digit is (:func:`servoscope.numbers.format_with_uncertainty`):
+        the report, ``identify``'s table and the notebook show these same strings. A fixed
+        parameter's error and interval are "—".
+        """
+        if not self.vary:
+            return format_value(self.value), "—", "—"
+        value, err = format_with_uncertainty(self.value, self.stderr)
+        return value, err, format_interval(self.ci95[0], self.ci95[1], self.stderr)
+
+    def held_text(self) -> str:
+        """How the user held it, for a label: " (held fixed)", " (= 4*gain)", " (bounded 20–80)" or ""."""
+        if self.expr is not None:
+            return f" (= {self.expr})"
+        if not self.vary:
+            return " (held fixed)"
+        if math.isfinite(self.min) and math.isfinite(self.max):
+            return f" (bounded {self.min:.4g}–{self.max:.4g})"
+        return ""
 
     def holds(self, truth: float) -> bool:
         """Whether the 95 % interval holds `truth`."""
@@ -487,12 +510,9 @@ class FitResult:
         return self.parameters.to_pandas()
 
     def _repr_html_(self) -> str:
-        rows = []
-        for p in self.parameters.values():
-            held = "tied: " + p.expr if p.expr else ("" if p.vary else "fixed")
-            rows.append([p.name, _cell(p.value), _cell(p.stderr, 3), f"[{_cell(p.ci95[0])}, {_cell(p.ci95[1])}]",
-                         p.unit, held])
-        table = html_rows(["parameter", "value", "stderr", "95 % interval", "unit", ""], rows,
+        # The cells the report and the command line write (Parameter.cells): one number, one text.
+        rows = [[p.name + p.held_text(), *p.cells(), p.unit] for p in self.parameters.values()]
+        table = html_rows(["parameter", "value", "std. error", "95 % interval", "unit"], rows,
                           caption=f"{type(self).__name__}: {self.model_name}")
         stats = self.fit_statistics()
         extra = ""

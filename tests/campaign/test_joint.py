@@ -12,19 +12,11 @@ from dataclasses import replace
 import pytest
 
 
-def test_backlash_found_in_rendered_footage(tmp_path):
-    from servoscope.campaign import identify
+def test_backlash_found_in_rendered_footage(backlash_identified):
     from servoscope.campaign.result import IdentificationResult
-    from servoscope.report import write_report
-    from servoscope.simulate import simulate_campaign
-    from servoscope.simulate.presets import get_preset
 
-    servo = replace(get_preset("quick").servo, backlash=0.004)
-    toml = simulate_campaign(tmp_path / "c", "quick", 1, width=480, height=384, codec="raw", servo=servo,
-                             sine_amplitudes=(0.05, 0.2))
-    res = identify(toml, workers=1, nonlinear="auto")
-    out = write_report(res, tmp_path / "out")
-    data = json.loads((tmp_path / "out" / "result.json").read_text())
+    res, out_dir, servo = backlash_identified
+    data = json.loads((out_dir / "result.json").read_text())
     model = data["model"]
     assert model["structure"] == "backlash" and model["backlash_rad"] == pytest.approx(0.004, rel=0.1)
     lo, hi = model["ci95"]["backlash_rad"]
@@ -43,7 +35,16 @@ def test_backlash_found_in_rendered_footage(tmp_path):
     assert data["step"]["model_source"] in ("frequency-domain model", "backlash model's linear part")
     assert abs(data["step"]["dead_time_s"] - 0.085) < 0.002
     assert model["fixed"] == []
-    html = out["report"].read_text()
+    # The headline is the selected model (issue 30): its K and ωn right with intervals holding the truth,
+    # where the transfer function fitted to the dwells (a describing function at their amplitudes) is not.
+    assert model["domain"] == "time domain" and model["gain"] == selected["gain"]
+    for name, true in (("gain", servo.gain), ("natural_frequency_rad_s", 37.0), ("dead_time_s", 0.085)):
+        lo, hi = model["ci95"][name]
+        assert lo <= true <= hi, (name, lo, hi, true)
+    fd = data["frequency_domain_model"]
+    assert "describing function" in fd["describes"] and fd["gain"] != model["gain"]
+    assert data["dead_time"]["source"] == "time_domain" and data["dead_time_s"] == model["dead_time_s"]
+    html = (out_dir / "report.html").read_text()
     assert "One model for the sines and the step" in html and "Measured and modelled traces" in html
     assert "Describing function" in html and "Candidates against one trace" in html
     # The describing function the report draws is the model's: at 5.24 Hz it meets the measured gains.
@@ -53,7 +54,7 @@ def test_backlash_found_in_rendered_footage(tmp_path):
         if abs(f - 5.24) < 0.01:
             a = next(t.amplitude for t in res.campaign.tests if t.label == label)
             assert abs(abs(fit.describing_function(f, [a])[0]) - g) < max(4 * se, 0.005 * g), (label, g, se)
-    again = IdentificationResult.load(tmp_path / "out")
+    again = IdentificationResult.load(out_dir)
     assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)
 
 

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servoscope.report.numbers import format_interval, format_value, format_with_uncertainty
+from servoscope.numbers import format_interval, format_value, format_with_uncertainty
 
 
 @pytest.mark.parametrize(

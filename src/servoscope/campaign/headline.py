@@ -16,18 +16,17 @@ The report's first table, ``identify``'s first table, the notebook view and resu
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..parameters import FitResult, Parameter, Parameters
-from ..sysid.model_text import model_equation
+from ..results import html_rows
+from ..sysid.model_text import PARAM_LABELS, model_equation
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .result import IdentificationResult
+__all__ = ["SOURCE_KEYS", "Headline", "chosen_dead_time", "headline"]
 
-__all__ = ["Headline", "headline"]
-
-#: result.json's name for each dead-time source the headline can take.
+#: result.json's name (in ``dead_time``) for each source of the headline's dead time.
 SOURCE_KEYS = {"step test": "step", "frequency response (phase)": "phase"}
+TIME_DOMAIN_KEY = "time_domain"
 
 
 @dataclass(frozen=True)
@@ -64,6 +63,23 @@ class Headline(FitResult):
     def parameters(self) -> Parameters:
         return self.table
 
+    def label(self, name: str) -> str:
+        """A parameter's name as a reader sees it, with its unit (the dead time with its source)."""
+        if name == "dead_time_s":
+            return f"dead time τ (s), from the {self.dead_time_source}" if self.dead_time_source else "dead time τ (s)"
+        return PARAM_LABELS.get(name, name)
+
+    def rows(self) -> list[list[str]]:
+        """One row per parameter: label (and how it was held), value, standard error, 95 % interval.
+
+        The cells every view writes: the report's first table, ``identify``'s, the notebook's.
+        """
+        return [[self.label(p.name) + p.held_text(), *p.cells()] for p in self.table.values()]
+
+    def _repr_html_(self) -> str:
+        return html_rows(["parameter", "value", "std. error", "95 % interval"], self.rows(),
+                         caption=f"{self.model_name}: {self.equation}")
+
 
 def _servo_equation(fit: Any) -> str:
     p = fit.params
@@ -71,11 +87,25 @@ def _servo_equation(fit: Any) -> str:
             f"{p['natural_frequency_rad_s']:.4g}·s + {p['natural_frequency_rad_s']:.4g}²) · e^(−sτ), "
             f"τ = {1e3 * p['dead_time_s']:.1f} ms")
     name = fit.nonlinear_parameter
-    return text if name is None else f"{text}, with {fit.structure.replace('_', ' ')} {name} = {p[name]:.4g}"
+    return text if name is None else f"{text}, {PARAM_LABELS.get(name, name)} = {p[name]:.4g}"
 
 
-def headline(result: "IdentificationResult") -> Headline:
-    """The model `result` states first (see the module's description)."""
+def chosen_dead_time(estimates: dict[str, Any]) -> tuple[str | None, Any]:
+    """The more precise of the step's and the phases' dead time: (its source's words, the estimate).
+
+    The step's wins a tie: it is the direct measurement (LED off → blade moving).
+    """
+    step, phase = estimates.get("step"), estimates.get("phase")
+    if step is not None and (phase is None or step.stderr_s <= phase.stderr_s):
+        return "step test", step
+    if phase is not None:
+        return "frequency response (phase)", phase
+    return None, None
+
+
+def headline(result: Any) -> Headline:
+    """The model `result` (an :class:`~servoscope.campaign.result.IdentificationResult`, which imports this
+    module) states first (see the module's description)."""
     selection = result.servo_model
     if selection is not None and selection.selected.structure != "linear":
         fit = selection.selected
@@ -83,8 +113,7 @@ def headline(result: "IdentificationResult") -> Headline:
                         f"{fit.structure} model (dwells and step together)", _servo_equation(fit))
     model = result.model
     rows = [p for p in model.parameters.values() if p.name != "dead_time_s"]
-    source = result.dead_time_source
-    chosen = result.dead_time_estimates.get(SOURCE_KEYS.get(source or "", ""))
+    source, chosen = chosen_dead_time(result.dead_time_estimates)
     if chosen is not None:
         rows.append(Parameter("dead_time_s", chosen.value_s, chosen.stderr_s, chosen.ci95_s, unit="s"))
     base = model.parameters
@@ -95,4 +124,4 @@ def headline(result: "IdentificationResult") -> Headline:
         correlation = base.correlation[idx][:, idx]
     return Headline("frequency domain", "linear", Parameters(rows, correlation=correlation, correlated=correlated
                                                              if correlation is not None else ()),
-                    source, model_equation(model, result.dead_time_s))
+                    source, model_equation(model, None if chosen is None else chosen.value_s))

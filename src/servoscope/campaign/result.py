@@ -21,21 +21,22 @@ from ..angle.view import ObliqueView
 from ..camera.exposure import ExposureEstimate
 from ..markers.track import Track
 from ..results import jsonable
-from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit
+from ..sysid import FrequencyResponse, SineFit, StepAnalysis, TransferFunctionFit, bandwidth_rad_s
 from ..sysid.linearity import AmplitudeCheck
 from ..sysid.heave import HeaveModel, HeaveRow
 from ..sysid.modes import ModeFit
 from ..sysid.servo_fit import fit_percent
 from ..sysid.servo_select import ServoModelSelection
 from ..sysid.servo_sim import NONLINEAR_PARAMETER
-from ..sysid.model_text import model_equation
+from ..sysid.dead_time import DeadTimeEstimate, dead_time_estimates
 from ..sysid.step import unit_step_function
+from .headline import SOURCE_KEYS, TIME_DOMAIN_KEY, Headline, chosen_dead_time, headline
 from .manifest import Campaign, TestSpec
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
-__all__ = ["IdentificationResult", "dead_time_estimates", "input_start", "input_start_stderr", "package_version"]
+__all__ = ["IdentificationResult", "input_start", "input_start_stderr", "package_version"]
 
 
 def input_start(test: TestSpec, track: Track) -> float | None:
@@ -59,7 +60,7 @@ def _fit_part(model: dict) -> dict:
     ``dead_time_from_phase_s``: undone here.
     """
     own = {"dead_time_from_phase_s", "dead_time_from_phase_stderr_s", "dead_time_source", "structure", "fixed",
-           "candidates", "time_domain", *NONLINEAR_PARAMETER.values()}
+           "candidates", "time_domain", "domain", "parameters", "describes", *NONLINEAR_PARAMETER.values()}
     fit = {k: v for k, v in model.items() if k not in own}
     for part in ("stderr", "ci95"):
         if isinstance(fit.get(part), dict):
@@ -84,30 +85,6 @@ def _loaded_campaign(data: dict, tests: list[TestSpec], path: Path, load_campaig
     return Campaign(path=manifest if data.get("campaign") else path, lead="", trail="", led=None, camera=None,
                     exposure_s=None, input_units=data.get("input_units", ""), settle_s=math.nan,
                     tests=tuple(tests), skipped=skipped, extra=tuple(data.get("extra_markers", ())))
-
-
-def dead_time_estimates(model, step, shared_t0_s: float) -> dict:
-    """The dead time from the dwells' phases and from the step, each with its own interval.
-
-    Returns
-    -------
-    dict
-        ``{"phase": {...} or None, "step": {...} or None}``, each
-        ``{"value_s", "stderr_s", "ci95_s", "shared_t0_stderr_s"}``.
-    """
-    out: dict = {"phase": None, "step": None}
-    if model.dead_time_s is not None and math.isfinite(model.dead_time_s):
-        se = math.hypot(model.dead_time_stderr_s or 0.0, shared_t0_s)
-        value = float(model.dead_time_s)
-        out["phase"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
-                        "shared_t0_stderr_s": shared_t0_s}
-    if step is not None and step.dead_time_s is not None and math.isfinite(step.dead_time_s):
-        se = float(step.dead_time_stderr_s or 0.0)
-        value = float(step.dead_time_s)
-        out["step"] = {"value_s": value, "stderr_s": se, "ci95_s": [value - 1.96 * se, value + 1.96 * se],
-                       "shared_t0_stderr_s": None}
-    return out
-
 
 
 @dataclass(frozen=True)
@@ -201,54 +178,71 @@ class IdentificationResult:
         return self.model.transfer_function
 
     @property
+    def headline(self) -> Headline:
+        """The model this result states first (:func:`servoscope.campaign.headline.headline`): the selected
+        time-domain model when it is nonlinear, else the transfer function with its better dead time."""
+        return headline(self)
+
+    @property
+    def parameters(self):
+        """The headline's parameters (:class:`~servoscope.parameters.Parameters`): what every view shows first."""
+        return self.headline.parameters
+
+    @property
     def dead_time_s(self) -> float | None:
-        """Dead time: the more precise of the step test's (LED off → blade moving,
-        fitted against the model) and the dwells' phases' (complex fit); None
-        without either. Its stderr and interval are the same estimate's."""
-        source = self.dead_time_source
-        if source is None:
-            return None
-        return self.dead_time_estimates["step" if source == "step test" else "phase"]["value_s"]
+        """The headline's dead time: the more precise of the step test's (LED off → blade moving, fitted
+        against the model) and the dwells' phases' (complex fit), or the selected nonlinear model's; None
+        without any. Its stderr and interval are the same estimate's."""
+        p = self.parameters.get("dead_time_s")
+        return None if p is None else p.value
+
+    @property
+    def bandwidth_rad_s(self) -> float:
+        """The headline model's −3 dB bandwidth, rad/s (the selected nonlinear model's linear part's)."""
+        if self.headline.domain == "time domain":
+            return bandwidth_rad_s(self.servo_model.selected.linear_transfer_function)
+        return self.model.bandwidth_rad_s
 
     @property
     def dead_time_source(self) -> str | None:
-        """"step test" or "frequency response (phase)": where :attr:`dead_time_s` comes from."""
-        estimates = self.dead_time_estimates
-        step, phase = estimates["step"], estimates["phase"]
-        if step is not None and (phase is None or step["stderr_s"] <= phase["stderr_s"]):
-            return "step test"
-        if phase is not None:
-            return "frequency response (phase)"
-        return None
+        """Where :attr:`dead_time_s` comes from: "step test", "frequency response (phase)" or the selected
+        nonlinear model ("backlash model (dwells and step together)")."""
+        return self.headline.dead_time_source
 
     @property
-    def dead_time_estimates(self) -> dict:
-        """The dead time from the dwells' phases and from the step, each with its interval (see :func:`dead_time_estimates`)."""
+    def dead_time_estimates(self) -> dict[str, DeadTimeEstimate | None]:
+        """The dead time from the dwells' phases and from the step, each with its interval
+        (:func:`servoscope.sysid.dead_time.dead_time_estimates`)."""
         return dead_time_estimates(self.model, self.step, self.shared_t0_stderr_s)
 
     @property
     def dead_time_stderr_s(self) -> float | None:
         """Standard error of :attr:`dead_time_s`, from the same estimate."""
-        chosen = self.dead_time_estimates.get({"step test": "step", "frequency response (phase)": "phase"}.get(
-            self.dead_time_source or "", ""))
-        return None if chosen is None else chosen["stderr_s"]
+        p = self.parameters.get("dead_time_s")
+        return None if p is None else p.stderr
 
     def summary(self) -> dict:
         """The content of ``result.json``: plain types only."""
-        model = dict(jsonable(self.model.summary()))
+        head = self.headline
         estimates = self.dead_time_estimates
-        # The model's own delay estimate (from the phases, complex fit) stays
-        # visible; the model's dead time is the best one available, and its
-        # stderr and interval are that estimate's (one name, one estimator).
-        model["dead_time_from_phase_s"] = model.get("dead_time_s")
-        model["dead_time_from_phase_stderr_s"] = None if estimates["phase"] is None else estimates["phase"]["stderr_s"]
-        model["dead_time_s"] = self.dead_time_s
-        model["dead_time_source"] = self.dead_time_source
-        model["dead_time_stderr_s"] = self.dead_time_stderr_s
-        chosen = estimates["step"] if self.dead_time_source == "step test" else estimates["phase"]
-        if chosen is not None and isinstance(model.get("ci95"), dict):
-            model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen["ci95_s"])}
-        model.update(self._structure_summary(model))
+        frequency_domain = self._frequency_domain_summary(estimates)
+        extra: dict[str, Any] = {}
+        if head.domain == "time domain":
+            model = self._time_domain_summary(head)
+            extra["frequency_domain_model"] = {
+                **frequency_domain, "describes": (
+                    f"the dwells' fundamentals at their input amplitudes: a describing function of the "
+                    f"{head.structure} servo, not its linear part (see model)")}
+            source_key = TIME_DOMAIN_KEY
+        else:
+            model = {**frequency_domain, **self._structure_summary(frequency_domain), "domain": head.domain}
+            source_key = SOURCE_KEYS.get(head.dead_time_source or "")
+        model["parameters"] = head.parameters.summary()
+        dead_time = {k: None if e is None else e.summary() for k, e in estimates.items()}
+        if source_key == TIME_DOMAIN_KEY and "dead_time_s" in head.parameters:
+            p = head.parameters["dead_time_s"]
+            dead_time[TIME_DOMAIN_KEY] = {"value_s": p.value, "stderr_s": p.stderr, "ci95_s": list(p.ci95),
+                                          "shared_t0_stderr_s": None}
         tests = []
         for test in self.campaign.tests:
             track = self.tracks[test.label]
@@ -281,11 +275,11 @@ class IdentificationResult:
                 "input_units": self.campaign.input_units,
                 "output_units": "rad",
                 "model": model,
-                "bandwidth_rad_s": self.model.bandwidth_rad_s,
-                "bandwidth_hz": self.model.bandwidth_rad_s / (2 * math.pi),
+                "bandwidth_rad_s": model.get("bandwidth_rad_s"),
+                "bandwidth_hz": None if model.get("bandwidth_rad_s") is None else model["bandwidth_rad_s"] / (2 * math.pi),
                 "dead_time_s": self.dead_time_s,
-                "dead_time": {**estimates, "source": {"step test": "step", "frequency response (phase)": "phase"}.get(
-                    self.dead_time_source or "")},
+                "dead_time": {**dead_time, "source": source_key},
+                **extra,
                 "exposure": None if self.exposure is None else self.exposure.summary(),
                 **({"gain_against_amplitude": [c.summary() for c in self.amplitude_checks]}
                    if self.amplitude_checks else {}),
@@ -305,6 +299,39 @@ class IdentificationResult:
                 "warnings": list(self.warnings),
             }
         )
+
+    def _frequency_domain_summary(self, estimates: dict) -> dict:
+        """The transfer-function fit's summary with the dead time its result states (the better estimate).
+
+        The fit's own delay (from the phases) stays as ``dead_time_from_phase_s``; ``dead_time_s``,
+        its stderr and interval are the chosen estimate's (one name, one estimator).
+        """
+        model = dict(jsonable(self.model.summary()))
+        source, chosen = chosen_dead_time(estimates)
+        phase = estimates["phase"]
+        model["dead_time_from_phase_s"] = model.get("dead_time_s")
+        model["dead_time_from_phase_stderr_s"] = None if phase is None else phase.stderr_s
+        model["dead_time_s"] = None if chosen is None else chosen.value_s
+        model["dead_time_source"] = source
+        model["dead_time_stderr_s"] = None if chosen is None else chosen.stderr_s
+        if chosen is not None and isinstance(model.get("ci95"), dict):
+            model["ci95"] = {**model["ci95"], "dead_time_s": list(chosen.ci95_s)}
+        return model
+
+    def _time_domain_summary(self, head: Headline) -> dict:
+        """result.json's ``model`` when the headline is the selected nonlinear model: its parameters
+        under the names the transfer function's use, the candidates and the time-domain fits."""
+        sel = self.servo_model.selected
+        p = head.parameters
+        return {"domain": head.domain, "structure": sel.structure, "order": [0, 2], "mode": "time domain",
+                "equation": head.equation, **{k: v.value for k, v in p.items()},
+                **{f"{k}_stderr": p[k].stderr for k in ("gain", "damping_ratio")},
+                "natural_frequency_stderr_rad_s": p["natural_frequency_rad_s"].stderr,
+                "dead_time_stderr_s": p["dead_time_s"].stderr, "dead_time_source": head.dead_time_source,
+                "params": {k: v.value for k, v in p.items()}, "stderr": {k: v.stderr for k, v in p.items()},
+                "ci95": {k: list(v.ci95) for k, v in p.items()}, "fixed": sorted(sel.fixed), "tied": dict(sel.tied),
+                **{k: v for k, v in self._structure_summary({}).items() if k in ("candidates", "time_domain")},
+                "bandwidth_rad_s": self.bandwidth_rad_s}
 
     def _structure_summary(self, model: dict) -> dict:
         """result.json's ``model`` additions: the structure, its parameter beside the linear ones, the candidates.
@@ -449,7 +476,8 @@ class IdentificationResult:
                 fits[label] = SineFit.from_summary(sf, time_s=track.angle_time_s[inside], y=track.angle_rad[inside])
         campaign = _loaded_campaign(data, tests, path, load_campaign)
         fr = FrequencyResponse.from_summary(data["frequency_response"])
-        model = TransferFunctionFit.from_summary(_fit_part(data["model"]), data=fr)
+        # Since issue 30 a nonlinear headline is `model` and the transfer function sits beside it.
+        model = TransferFunctionFit.from_summary(_fit_part(data.get("frequency_domain_model") or data["model"]), data=fr)
         step = None
         if data.get("step") is not None:
             summary = dict(data["step"])
@@ -505,16 +533,10 @@ class IdentificationResult:
         return model.plot(ax, phase_ax=phase_ax)
 
     def _repr_html_(self) -> str:
-        rows = "".join(
-            f"<tr><td>{name}</td><td>{self.model.params.get(name, float('nan')):.5g}</td>"
-            f"<td>{self.model.stderr.get(name, float('nan')):.2g}</td></tr>"
-            for name in self.model.param_names
-        )
-        bw = self.model.bandwidth_rad_s
-        return (
-            f"<p>{model_equation(self.model, self.dead_time_s)}; bandwidth {bw:.4g} rad/s</p>"
-            f"<table><tr><th>parameter</th><th>value</th><th>std. error</th></tr>{rows}</table>"
-        )
+        # The headline's table (FitResult's), under the model's equation: the numbers the report
+        # and `identify` show first.
+        head = self.headline
+        return f"<p>{head.equation}</p>" + head._repr_html_()
 
 
 def package_version() -> str:

@@ -17,14 +17,16 @@ from ..angle.pivot import axis_moved
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
 from ..markers.settings import TrackerSettings
 from ..markers.track import Track
+from ..parameters import interval95
 from ..sysid import FrequencyResponse, SineFit, fit_transfer_function, with_gain_scale_uncertainty
+from ..sysid.dead_time import dead_time_estimates
 from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
                     step_ringdown_warning)
 from .dwells import amplitude_checks, dwell_response, fit_dwells, fit_mode
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
-from .result import IdentificationResult, dead_time_estimates
+from .result import IdentificationResult
 from .step_test import step_test
 
 __all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
@@ -239,12 +241,14 @@ def dead_time_disagreement(estimates: dict) -> str | None:
     phase, step = estimates.get("phase"), estimates.get("step")
     if phase is None or step is None:
         return None
-    diff = phase["value_s"] - step["value_s"]
-    se = math.hypot(phase["stderr_s"], step["stderr_s"])
-    if se <= 0 or abs(diff) <= 1.96 * se:
+    diff = phase.value_s - step.value_s
+    se = math.hypot(phase.stderr_s, step.stderr_s)
+    # Their difference's own 95 % interval holds zero: they agree.
+    lo, hi = interval95(diff, se)
+    if se <= 0 or lo <= 0.0 <= hi:
         return None
-    return (f"dead time from the dwells' phases ({1e3 * phase['value_s']:.2f} ± {1e3 * phase['stderr_s']:.2f} ms) and "
-            f"from the step ({1e3 * step['value_s']:.2f} ± {1e3 * step['stderr_s']:.2f} ms) differ by "
+    return (f"dead time from the dwells' phases ({1e3 * phase.value_s:.2f} ± {1e3 * phase.stderr_s:.2f} ms) and "
+            f"from the step ({1e3 * step.value_s:.2f} ± {1e3 * step.stderr_s:.2f} ms) differ by "
             f"{abs(diff) / se:.1f} standard errors: the linear model or the "
             "input start of one of them is not what the footage shows (check the LED, the exposure and the "
             "step's fit)")

@@ -12,7 +12,7 @@ from .figures import (amplitude_figure, blade_frame_figure, bode_figure, candida
                       heave_figure, overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
 from .plane_section import plane_section
-from .numbers import format_interval, format_value, format_with_uncertainty
+from ..numbers import format_interval, format_value, format_with_uncertainty
 from ..camera.plane_map import recorded_points
 from ..sysid.model_text import PARAM_LABELS, model_equation
 
@@ -69,13 +69,13 @@ def dead_time_rows(result: "IdentificationResult") -> list[list[str]]:
         e = estimates.get(key)
         if e is None:
             continue
-        value, err_text = format_with_uncertainty(1e3 * e["value_s"], 1e3 * e["stderr_s"])
+        value, err_text = format_with_uncertainty(1e3 * e.value_s, 1e3 * e.stderr_s)
         note = " (the model's)" if key == chosen else ""
-        shared = e.get("shared_t0_stderr_s")
-        if shared:
-            note += f"; includes ±{1e3 * shared:.2f} ms of input-start timing the dwells may share"
+        if e.shared_t0_stderr_s:
+            note += f"; includes ±{1e3 * e.shared_t0_stderr_s:.2f} ms of input-start timing the dwells may share"
+        lo, hi = e.ci95_s
         rows.append([f"dead time τ (ms), from the {label}{note}",
-                     f"{value} ± {err_text}, 95 % {format_interval(1e3 * e['ci95_s'][0], 1e3 * e['ci95_s'][1], 1e3 * e['stderr_s'])}"])
+                     f"{value} ± {err_text}, 95 % {format_interval(1e3 * lo, 1e3 * hi, 1e3 * e.stderr_s)}"])
     return rows or [["dead time τ (ms)", "not measured"]]
 
 
@@ -145,7 +145,7 @@ def parameter_table(result: "IdentificationResult") -> tuple[list[str], list[lis
         err = model.stderr.get(name)
         if name == "dead_time_s" and phase_dead is not None:
             # With the input-start timing the dwells may share (not in the fit's own error).
-            lo_hi, err = phase_dead["ci95_s"], phase_dead["stderr_s"]
+            lo_hi, err = phase_dead.ci95_s, phase_dead.stderr_s
         value_text, err_text = format_with_uncertainty(model.params.get(name), err)
         held = model.held.get(name, {})
         label = PARAM_LABELS.get(name, name) + (
@@ -169,12 +169,12 @@ def _quantities(result: "IdentificationResult") -> list[list]:
     """The model's other quantities: bandwidth, dead times, exposure, the fit's residuals."""
     model = result.model
     return [
-        ["−3 dB bandwidth (rad/s)", model.bandwidth_rad_s],
-        ["−3 dB bandwidth (Hz)", model.bandwidth_rad_s / (2 * math.pi)],
+        ["−3 dB bandwidth (rad/s)", result.bandwidth_rad_s],
+        ["−3 dB bandwidth (Hz)", result.bandwidth_rad_s / (2 * math.pi)],
         *dead_time_rows(result),
         ["camera exposure (shutter)", exposure_text(result)],
-        ["residual RMS of the fit, magnitude (dB)", model.residual_rms_db],
-        ["residual RMS of the fit, phase (deg)", model.residual_rms_deg],
+        ["residual RMS of the frequency-domain fit, magnitude (dB)", model.residual_rms_db],
+        ["residual RMS of the frequency-domain fit, phase (deg)", model.residual_rms_deg],
     ]
 
 
@@ -198,22 +198,53 @@ def _add_order_selection(s: ReportSection, selection) -> None:
 
 
 def model_section(result: "IdentificationResult", summary: dict, figures_dir) -> ReportSection:
-    """The identified model: its equation, how it was fitted, its parameters and quantities, the warnings."""
+    """The identified model: its equation, how it was fitted, its parameters and quantities, the warnings.
+
+    The first table is the headline's (:func:`servoscope.campaign.headline.headline`), the numbers
+    ``identify`` prints and result.json's ``model`` holds. When a nonlinear structure was selected,
+    the transfer function fitted to the dwells follows under its own name: a describing function.
+    """
     model = result.model
+    head = result.headline
     s = ReportSection("Identified model", figures_dir=figures_dir)
-    s.text(model_equation(model, result.dead_time_s))
-    s.text(_fit_text(model))
-    s.table(*parameter_table(result))
+    s.text(head.equation)
+    if head.domain == "time domain":
+        s.text(f"Fit: the {head.structure} model, selected from the whole traces (the dwells and the step "
+               "together; see \"One model for the sines and the step\").")
+        s.table(["parameter", "value", "standard error", "95 % interval"], head.rows())
+        s.table(["quantity", "value"], _quantities(result))
+        s.text(f"The transfer function fitted to the dwells' fundamentals, below, describes the {head.structure} "
+               "servo at the dwells' input amplitudes (a describing function), not its linear part: its gain and "
+               "natural frequency are not the servo's.")
+        s.text(_fit_text(model))
+        s.table(*parameter_table(result))
+    else:
+        s.text(_fit_text(model))
+        s.table(*_headline_table(result))
+        s.table(["quantity", "value"], _quantities(result))
     if model.stderr_jackknife is not None:
         s.text("Standard errors: the larger of the Jacobian's (scaled by the misfit when the residuals exceed their "
                "stated errors) and the delete-one-dwell jackknife's, which refits the model with each dwell left "
                "out: a dwell with an error its own statistics cannot show (the codec shrinking the smallest "
                "motions, a resonance the model lacks) widens the interval of what rests on it.")
-    s.table(["quantity", "value"], _quantities(result))
     _add_warnings(s, result, summary)
     if model.order_selection is not None:
         _add_order_selection(s, model.order_selection)
     return s
+
+
+def _headline_table(result: "IdentificationResult") -> tuple[list[str], list[list[str]]]:
+    """The headline's rows with the transfer-function fit's bootstrap and influence columns where they are its."""
+    head = result.headline
+    header, rows = parameter_table(result)
+    extra = {name: row[4:] for name, row in zip(result.model.param_names, rows)}
+    out = []
+    for name, row in zip(head.parameters, head.rows()):
+        # The bootstrap's and the influence's columns are the transfer function's: not the step's dead time.
+        own = name != "dead_time_s" or head.dead_time_source == "frequency response (phase)"
+        cells = extra.get(name, []) if own else []
+        out.append(row + cells + ["—"] * (len(header) - 4 - len(cells)))
+    return header, out
 
 
 def _dwell_rows(result: "IdentificationResult") -> tuple[list[str], list[list], bool]:

@@ -16,6 +16,10 @@ PARAM_LABELS: dict[str, str] = {
     "dead_time_s": "dead time from the dwells' phases τ (s)",
     "pole_rad_s": "real pole (rad/s)",
     "zero_rad_s": "real zero (rad/s)",
+    "rate_limit_rad_s": "rate limit (rad/s)",
+    "backlash_rad": "backlash, the linkage's play (rad)",
+    "quantization_step": "command quantization step (input units)",
+    "saturation_rad": "saturation (rad)",
 }
 
 
