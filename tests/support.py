@@ -213,3 +213,52 @@ def run_cli(*args, cwd=None) -> "subprocess.CompletedProcess[str]":
                 err.write(f"{exc.code}\n")
     return subprocess.CompletedProcess(["servoscope", *argv], code, out.getvalue(), err.getvalue())
 
+
+# result.json's flat name for each parameter's standard error (the transfer function's, kept).
+FLAT_STDERR = {"gain": "gain_stderr", "natural_frequency_rad_s": "natural_frequency_stderr_rad_s",
+               "damping_ratio": "damping_ratio_stderr", "dead_time_s": "dead_time_stderr_s"}
+
+
+def _views(result, out: Path, capsys) -> tuple[dict, str, str, str]:
+    import html
+    import json
+
+    from servoscope.cli_tables import print_model
+
+    data = json.loads((out / "result.json").read_text())
+    report = html.unescape((out / "report.html").read_text())
+    capsys.readouterr()
+    print_model(result)
+    table = capsys.readouterr().out
+    notebook = html.unescape(result._repr_html_())
+    return data, report, table, notebook
+
+
+def check_every_view(result, out: Path, capsys) -> list[str]:
+    """Every headline parameter the same in result.json, report.html, ``identify``'s table and the notebook view
+    (issue 30): result.json's ``model.parameters`` is the oracle, each text holds its cells; returns the names."""
+    data, report, table, notebook = _views(result, out, capsys)
+    head = result.headline
+    model = data["model"]
+    stored = model["parameters"]
+    assert list(stored) == list(head.parameters)
+    from servoscope.parameters import Parameter
+
+    for name, entry in stored.items():
+        p = Parameter.from_summary(name, entry)
+        assert p == head.parameters[name]  # result.json holds the headline's parameter whole
+        # result.json's older fields say the same.
+        assert model[name] == p.value and model["ci95"][name] == list(p.ci95)
+        flat = FLAT_STDERR.get(name)
+        assert (model[flat] if flat in model else model["stderr"][name]) == p.stderr
+        cells = [head.label(name) + p.held_text(), *p.cells()]
+        row = "<td>" + "</td><td>".join(cells) + "</td>"
+        assert row in report, (name, row)
+        assert row in notebook, (name, row)
+        # The terminal table may wrap a long label: the row's first line holds its start and every number.
+        lines = [ln for ln in table.splitlines() if ln.startswith("│ " + cells[0][:14])]
+        assert lines and all(c in lines[0] for c in cells[1:]), (name, cells, lines)
+    # The headline's dead time is the one result.json states at the top level.
+    if "dead_time_s" in stored:
+        assert data["dead_time_s"] == stored["dead_time_s"]["value"]
+    return list(stored)

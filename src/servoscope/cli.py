@@ -338,19 +338,15 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
-    from .campaign.joint import check_nonlinear, split_held
+    from .campaign.runner import checked_holds
     from .cli_tables import print_model
     from .report import write_report
-    from .sysid import check_held
 
     order = parse_order(order_text)
     fix, bounds = parse_held(fix_text, bound_text)
     ties = parse_ties(tie_text)
     manifest = load_campaign(campaign, keep_going=keep_going)  # validates everything before --out is touched
-    held = manifest.held_parameters(fix, bounds)
-    check_nonlinear(manifest, nonlinear, order, *held, {**manifest.model_ties, **ties})
-    fr_fix, fr_bounds, _, _ = split_held(*held)
-    check_held(order, "minimum_phase", fr_fix, fr_bounds)
+    checked_holds(manifest, order, nonlinear, fix, bounds, ties)  # identify's own check, before any tracking
     if self_calibrate_plane and manifest.plane is not None:
         raise ServoscopeError(f"{campaign}: [camera] plane is given: --self-calibrate-plane is for footage without a "
                               "plane; leave one of them out")

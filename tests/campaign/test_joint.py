@@ -11,6 +11,8 @@ from dataclasses import replace
 
 import pytest
 
+from support import check_every_view
+
 
 def test_backlash_found_in_rendered_footage(backlash_identified):
     from servoscope.campaign.result import IdentificationResult
@@ -56,6 +58,20 @@ def test_backlash_found_in_rendered_footage(backlash_identified):
             assert abs(abs(fit.describing_function(f, [a])[0]) - g) < max(4 * se, 0.005 * g), (label, g, se)
     again = IdentificationResult.load(out_dir)
     assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)
+
+
+def test_a_servo_with_play_is_stated_by_its_selected_model_everywhere(backlash_identified, capsys):
+    result, out, servo = backlash_identified
+    names = check_every_view(result, out, capsys)
+    assert names == ["gain", "natural_frequency_rad_s", "damping_ratio", "dead_time_s", "backlash_rad"]
+    p = result.parameters
+    for name, true in (("gain", servo.gain), ("natural_frequency_rad_s", 37.0), ("backlash_rad", 0.004)):
+        assert p[name].holds(true), (name, p[name], true)
+        assert abs(p[name].value - true) < 0.03 * true
+    # The transfer function fitted to the dwells is kept beside it, under its own name, and is not right.
+    assert abs(result.model.gain - servo.gain) > 0.05 * servo.gain
+    report = (out / "report.html").read_text()
+    assert "a describing function" in report and "not its linear part" in report
 
 
 def test_bad_nonlinear_requests_are_one_line_and_write_nothing(quick_campaign, tmp_path, capsys):

@@ -359,12 +359,9 @@ def test_tracked_footage_backlash_is_flagged_linear_servo_is_not(tmp_path, quick
 
 # ------------------------------------------------- bad input, end to end
 def _with(track, **changes):
-    import copy
+    from dataclasses import replace
 
-    new = copy.copy(track)
-    for k, v in changes.items():
-        setattr(new, k, v)
-    return new
+    return replace(track, **changes)  # a Track is frozen: a changed one is a new one
 
 
 def test_dwell_without_valid_frames_and_motionless_step_are_left_out(tmp_path, quick_result):

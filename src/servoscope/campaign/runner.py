@@ -18,7 +18,7 @@ from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure
 from ..markers.settings import TrackerSettings
 from ..markers.track import Track
 from ..parameters import interval95
-from ..sysid import FrequencyResponse, SineFit, fit_transfer_function, with_gain_scale_uncertainty
+from ..sysid import FrequencyResponse, SineFit, check_held, fit_transfer_function, with_gain_scale_uncertainty
 from ..sysid.dead_time import dead_time_estimates
 from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
                     step_ringdown_warning)
@@ -29,7 +29,7 @@ from .plane_check import campaign_in_view, plane_summary
 from .result import IdentificationResult
 from .step_test import step_test
 
-__all__ = ["IdentificationResult", "identify", "led_coverage_warning", "track_campaign"]
+__all__ = ["IdentificationResult", "checked_holds", "identify", "led_coverage_warning", "track_campaign"]
 
 ProgressFn = Callable[[str, int, int], None]
 
@@ -262,10 +262,24 @@ class _Held(NamedTuple):
     ties: dict
 
 
-def _held_parameters(campaign: Campaign, fix, bounds, ties) -> _Held:
-    """The manifest's ``[model]`` holds, overridden by the caller's."""
+def checked_holds(campaign: Campaign, order, nonlinear: str, fix=None, bounds=None, ties=None) -> _Held:
+    """The parameters held (the manifest's ``[model]``, overridden by the caller's), checked once for every model
+    the identification will fit, before anything is tracked: :func:`identify` and ``servoscope identify`` both
+    call this.
+
+    Raises
+    ------
+    ServoscopeError
+        What :func:`servoscope.parameters.check_held` refuses, for the frequency-domain fit of `order` and for
+        each time-domain structure `nonlinear` asks for, and what the campaign cannot support
+        (:func:`~servoscope.campaign.joint.check_nonlinear`).
+    """
     held_fix, held_bounds = campaign.held_parameters(fix, bounds)
-    return _Held(held_fix, held_bounds, {**campaign.model_ties, **(ties or {})})
+    held = _Held(held_fix, held_bounds, {**campaign.model_ties, **(ties or {})})
+    check_nonlinear(campaign, nonlinear, order, held.fix, held.bounds, held.ties)
+    fr_fix, fr_bounds, _, _ = split_held(held.fix, held.bounds)
+    check_held(order, "minimum_phase", fr_fix, fr_bounds)
+    return held
 
 
 def _tracked(campaign: Campaign, keep_going: bool, progress: ProgressFn | None,
@@ -440,8 +454,7 @@ def identify(
         campaign = load_campaign(campaign)
     if not isinstance(order, str):
         order = tuple(order)  # (0, 2) or [0, 2] alike
-    held = _held_parameters(campaign, fix, bounds, ties)
-    check_nonlinear(campaign, nonlinear, order, held.fix, held.bounds, held.ties)
+    held = checked_holds(campaign, order, nonlinear, fix, bounds, ties)
     if tracks is None:
         campaign, tracks = _tracked(campaign, keep_going, progress, track_options)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]
