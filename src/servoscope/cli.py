@@ -52,7 +52,7 @@ def cli() -> None:
 
 @cli.command()
 @click.argument("outdir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--preset", default="paper", show_default=True, help="Campaign preset: paper, quick, paper-flap (a flapping blade), paper-bend (the same blade bending, seen by two more stickers), paper-nonlinear (the paper's puzzle: linkage play).")
+@click.option("--preset", default="paper", show_default=True, help="Campaign preset: paper, quick, paper-flap (a flapping blade), paper-bend (the same blade bending, seen by two more stickers), paper-nonlinear (the paper's puzzle: linkage play), paper-sweep (one 12 s logarithmic sweep, 0.5–15 Hz).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed: same seed, same footage.")
 @click.option("--codec", type=click.Choice(["h264", "hevc", "mpeg2", "raw"]),
               help="Video codec (preset's: h264; hevc: phones' H.265; mpeg2: HDV's, the paper's camera).")

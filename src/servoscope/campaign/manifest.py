@@ -135,6 +135,10 @@ class Campaign:
     def step_tests(self) -> list[TestSpec]:
         return [t for t in self.tests if t.kind == "step"]
 
+    @property
+    def sweep_tests(self) -> list[TestSpec]:
+        return [t for t in self.tests if t.kind == "sweep"]
+
     @classmethod
     def load(cls, path: str | Path, *, check_videos: bool = True, keep_going: bool = False,
              planned: bool = False) -> "Campaign":

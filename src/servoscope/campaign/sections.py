@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 from ..camera.model import CameraModel
@@ -22,6 +21,7 @@ from ..markers.colour import parse_colour
 from ..markers.selection import check_near
 from ..markers.settings import extra_marker_problems
 from ..video.frame_source import MANIFEST_KEYS, SOURCE_SEPARATOR, manifest_frame_source, source_name
+from .inputs import SWEEP_KEYS, TestSpec, check_input, stated_fps
 
 __all__ = ["TestSpec", "Problems", "camera_section", "markers_section", "input_section", "analysis_section", "tests_section",
            "plan_section", "default_labels"]
@@ -30,48 +30,13 @@ _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp", "plane"}
 _MARKER_KEYS = {"lead", "trail", "led", "reference", "extra"}
 _INPUT_KEYS = {"units"}
 _ANALYSIS_KEYS = {"settle_s"}
-_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "t0_s", "label"}
-_KINDS = ("sine", "step")
+_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "t0_s", "label", *SWEEP_KEYS}
 #: A plan's ``[plan]`` table (``servoscope plan`` / ``drive``) and its ``[[plan.dwells]]``; its tests' keys.
 _PLAN_KEYS = {"fps", "update_hz", "settle_s", "periods", "min_seconds", "lead_in_s", "tail_s", "rest_s", "dwells",
               "drive"}
 _PLAN_POSITIVE = ("fps", "update_hz", "periods")  # > 0; the other numbers ≥ 0
 _DWELL_KEYS = {"duration_s", "warnings", "max_late_ms"}
-_PLAN_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label"}
-
-
-@dataclass(frozen=True)
-class TestSpec:
-    """One recording of the campaign.
-
-    Attributes
-    ----------
-    video : Path
-        Absolute path of the recording (a frame source's path string with its
-        options, ``…/dwell_01/*.tif#fps=2000``, for ``frames = …``); None in a
-        plan, before the rig has recorded it.
-    kind : {"sine", "step"}
-    amplitude : float
-        Sine amplitude or step size, input units.
-    frequency_hz : float or None
-        Sine frequency (Hz); None for a step.
-    t0_s : float or None
-        Input start given by the manifest (when there is no LED).
-    label : str
-        Name in tables and file names (the video's file name by default).
-    frames : bool
-        Given as ``frames = …`` (an image sequence or a high-speed raw file), not ``video = …``.
-    """
-
-    __test__ = False  # not a pytest test class despite its name
-
-    video: Path
-    kind: str
-    amplitude: float
-    frequency_hz: float | None = None
-    t0_s: float | None = None
-    label: str = ""
-    frames: bool = False
+_PLAN_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label", *SWEEP_KEYS}
 
 
 class Problems:
@@ -337,7 +302,7 @@ def default_labels(entries: list[dict], base: Path) -> list[str]:
 
 
 def _check_recording(problems: Problems, where: str, video: str, video_path: Path, frequency, camera: dict,
-                     label: str, skipped: list, keep_going: bool) -> bool:
+                     label: str, skipped: list, keep_going: bool, frequency_key: str = "frequency_hz") -> bool:
     """Whether the recording opens, and its frame rate resolves the test's frequency and the camera's times."""
     from ..video.reader import probe_video  # deferred: PyAV is slow to import
 
@@ -353,7 +318,7 @@ def _check_recording(problems: Problems, where: str, video: str, video_path: Pat
     ok = True
     if frequency is not None and info.frame_rate_hz and frequency >= 0.5 * info.frame_rate_hz:
         problems.add(
-            f"{where}.frequency_hz",
+            f"{where}.{frequency_key}",
             f"{frequency:g} Hz is at or above half the video's frame rate "
             f"({info.frame_rate_hz:g} frames/s): the camera cannot resolve it",
         )
@@ -374,37 +339,6 @@ def _check_recording(problems: Problems, where: str, video: str, video_path: Pat
             f"({1e3 / info.frame_rate_hz:.4g} ms): a sensor reads one frame's rows before the next's",
         )
     return ok
-
-
-def _test_input(problems: Problems, where: str, entry: dict) -> tuple[bool, str, float | None, float | None]:
-    """A test's kind, amplitude and frequency, checked: (ok, kind, amplitude, frequency)."""
-    ok = True
-    kind = entry.get("kind")
-    if kind not in _KINDS:
-        problems.add(f"{where}.kind", f"unknown kind {kind!r} (use \"sine\" or \"step\")")
-        ok = False
-    amplitude = None
-    if "amplitude" not in entry:
-        problems.add(f"{where}.amplitude", "missing")
-        ok = False
-    else:
-        amplitude = problems.number(f"{where}.amplitude", entry["amplitude"], nonzero=True)
-        if amplitude is None:
-            ok = False
-        elif kind == "sine" and amplitude < 0:
-            problems.add(f"{where}.amplitude", f"must be > 0 for a sine, got {amplitude!r}")
-            ok = False
-    frequency = None
-    if kind == "sine":
-        if "frequency_hz" not in entry:
-            problems.add(f"{where}.frequency_hz", "missing: a sine test needs its frequency")
-            ok = False
-        else:
-            frequency = problems.number(f"{where}.frequency_hz", entry["frequency_hz"], positive=True)
-            ok = ok and frequency is not None
-    elif kind == "step" and "frequency_hz" in entry:
-        problems.add(f"{where}.frequency_hz", "a step test has no frequency")
-    return ok, kind, amplitude, frequency
 
 
 def _test_source(problems: Problems, where: str, i: int, entry: dict, base: Path, stems: list[str],
@@ -455,7 +389,7 @@ def tests_section(data: dict, base: Path, problems: Problems, camera: dict, *, c
             continue
         problems.unknown(where, entry.keys(), _TEST_KEYS | set(MANIFEST_KEYS))
         ok, video, default_label = _test_source(problems, where, i, entry, base, stems, planned)
-        input_ok, kind, amplitude, frequency = _test_input(problems, where, entry)
+        input_ok, kind, amplitude, frequency, sweep = check_input(problems, where, entry, stated_fps(data, entry))
         ok = ok and input_ok
         t0 = None
         if "t0_s" in entry:
@@ -478,9 +412,10 @@ def tests_section(data: dict, base: Path, problems: Problems, camera: dict, *, c
                 ok = False
             videos.setdefault(video_path, i)
             if check_videos and ok:
-                ok = _check_recording(problems, where, video, video_path, frequency, camera, label, skipped, keep_going)
+                ok = _check_recording(problems, where, video, video_path, sweep.get("to_hz", frequency), camera, label,
+                                      skipped, keep_going, "to_hz" if sweep else "frequency_hz")
         if ok and (video_path is not None or planned):
-            tests.append(TestSpec(video_path, kind, float(amplitude), frequency, t0, label, "frames" in entry))
+            tests.append(TestSpec(video_path, kind, float(amplitude), frequency, t0, label, "frames" in entry, **sweep))
     return tests, skipped
 
 

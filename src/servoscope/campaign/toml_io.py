@@ -128,6 +128,10 @@ def test_entries(c: Campaign) -> list[dict[str, Any]]:
         out.append({k: v for k, v in {
             **entry, "label": t.label if t.label and t.label != default else None, "kind": t.kind,
             "frequency_hz": None if t.frequency_hz is None else float(t.frequency_hz),
+            # A sweep's own keys (None, so left out, for the other kinds).
+            **{k: None if getattr(t, k, None) is None else float(getattr(t, k))
+               for k in ("from_hz", "to_hz", "duration_s")},
+            "shape": getattr(t, "shape", None),
             "amplitude": float(t.amplitude), "t0_s": None if t.t0_s is None else float(t.t0_s),
         }.items() if v is not None})
     return out

@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from ..defaults import LEAD_COLOUR, LED_COLOUR, MIN_DWELL_S, SETTLE_S, TRAIL_COLOUR
+from .chirp import DEFAULT_NOISE_DEG
 from .protocols import PROTOCOLS
 
 __all__ = ["plan", "drive"]
@@ -20,10 +21,21 @@ __all__ = ["plan", "drive"]
 
 @click.command("plan")
 @click.option("--fps", type=float, required=True, help="Camera frame rate, frames/s.")
-@click.option("--from", "from_hz", type=float, required=True, help="Lowest dwell frequency, Hz.")
-@click.option("--to", "to_hz", type=float, required=True, help="Highest dwell frequency, Hz.")
+@click.option("--from", "from_hz", type=float, help="Lowest dwell frequency, Hz (sine dwells; required without --sweep).")
+@click.option("--to", "to_hz", type=float, help="Highest dwell frequency, Hz (sine dwells; required without --sweep).")
 @click.option("--points", default=14, show_default=True, type=int, help="Number of log-spaced frequencies.")
-@click.option("--amplitude", default=0.1, show_default=True, type=float, help="Sine amplitude, input units.")
+@click.option("--sweep", "sweep_text", metavar="F0:F1",
+              help="Instead of sine dwells, one frequency sweep (chirp) from F0 to F1 Hz, e.g. 0.5:20; needs --duration.")
+@click.option("--duration", "duration_s", type=float,
+              help="Sweep duration, s (rounded up to a whole number of cycles, so the command ends at 0).")
+@click.option("--sweep-shape", type=click.Choice(["log", "linear"]), default="log", show_default=True,
+              help="Sweep shape: log (equal time per octave) or linear.")
+@click.option("--noise-deg", type=float, default=DEFAULT_NOISE_DEG, show_default=True,
+              help="Per-frame angle noise of the track, degrees: sets the sweep's expected coherence "
+                   "(`servoscope track` prints the measured one).")
+@click.option("--record-seconds", "record_s", type=float,
+              help="Longest recording the camera makes, s: a sweep whose lead-in, sweep and tail exceed it is refused.")
+@click.option("--amplitude", default=0.1, show_default=True, type=float, help="Sine or sweep amplitude, input units.")
 @click.option("--amplitudes", "amplitudes_text", metavar="A,B,…",
               help="Amplitude as a test axis: dwells at every frequency for each amplitude (e.g. 0.05,0.1,0.2); "
                    "identify compares each frequency's gains (the linearity check).")
@@ -50,10 +62,18 @@ __all__ = ["plan", "drive"]
 def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float, periods: float,
          min_seconds: float, settle_s: float, update_hz: float, step: bool, step_amplitude: float,
          step_seconds: float, lead_in_s: float, tail_s: float, rest_s: float, lead: str, trail: str,
-         led: str, units: str, out: Path, amplitudes_text: str | None) -> None:
-    """Plan a log-spaced sine sweep and a step test; write a campaign.toml without videos."""
+         led: str, units: str, out: Path, amplitudes_text: str | None, sweep_text: str | None,
+         duration_s: float | None, sweep_shape: str, noise_deg: float, record_s: float | None) -> None:
+    """Plan the tests and write a campaign.toml without videos.
+
+    Log-spaced sine dwells (--from, --to, --points), or one frequency sweep
+    (--sweep F0:F1 --duration S), then a step test unless --no-step. For a sweep
+    the plan prints the coherence expected at the top frequency for the angle
+    noise given (--noise-deg) and warns below 0.6.
+    """
     from ..errors import ServoscopeError
     from ..markers.colour import parse_colour
+    from .chirp import plan_chirp, sweep_coherence
     from .plan import plan_sweep, write_plan
 
     amplitudes = None
@@ -66,16 +86,44 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
 
     for option, colour in (("--lead", lead), ("--trail", trail), ("--led", led)):
         parse_colour(colour, what=option)
-    sweep = plan_sweep(
-        fps, from_hz, to_hz, points=points, amplitude=amplitude, periods=periods, min_seconds=min_seconds,
-        settle_s=settle_s, update_hz=update_hz, step=step, step_amplitude=step_amplitude,
-        step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s,
-        markers={"lead": lead, "trail": trail, "led": led}, units=units, amplitudes=amplitudes,
-    )
+    markers = {"lead": lead, "trail": trail, "led": led}
+    if sweep_text is not None:
+        if from_hz is not None or to_hz is not None or amplitudes is not None:
+            raise ServoscopeError("--sweep plans one sweep instead of sine dwells: drop --from, --to and --amplitudes")
+        if duration_s is None:
+            raise ServoscopeError(f"--sweep {sweep_text}: give its --duration in seconds")
+        try:
+            sweep_from_hz, sweep_to_hz = (float(v) for v in sweep_text.split(":"))
+        except ValueError:
+            raise ServoscopeError(f"--sweep {sweep_text!r}: give F0:F1 in Hz, e.g. 0.5:20") from None
+        sweep = plan_chirp(
+            fps, sweep_from_hz, sweep_to_hz, duration_s, shape=sweep_shape, amplitude=amplitude, noise_deg=noise_deg,
+            record_s=record_s, settle_s=settle_s, min_seconds=min_seconds, update_hz=update_hz, step=step,
+            step_amplitude=step_amplitude, step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s,
+            rest_s=rest_s, markers=markers, units=units,
+        )
+    else:
+        if from_hz is None or to_hz is None:
+            raise ServoscopeError("give --from and --to (sine dwells) or --sweep F0:F1 --duration S (one sweep)")
+        if duration_s is not None or record_s is not None:
+            raise ServoscopeError("--duration and --record-seconds go with --sweep")
+        sweep = plan_sweep(
+            fps, from_hz, to_hz, points=points, amplitude=amplitude, periods=periods, min_seconds=min_seconds,
+            settle_s=settle_s, update_hz=update_hz, step=step, step_amplitude=step_amplitude,
+            step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s,
+            markers=markers, units=units, amplitudes=amplitudes,
+        )
     write_plan(sweep, out)
     for i, d in enumerate(sweep.dwells, start=1):
-        what = f"{d.frequency_hz:>8g} Hz" if d.kind == "sine" else "    step   "
+        if d.kind == "sweep":
+            what = f"{d.shape} sweep {d.from_hz:g}–{d.to_hz:g} Hz"
+        else:
+            what = f"{d.frequency_hz:>8g} Hz" if d.kind == "sine" else "    step   "
         click.echo(f"{i:3d} {what}  amplitude {d.amplitude:g}  {d.duration_s:7.2f} s")
+    for d in sweep.dwells:
+        if d.kind == "sweep":
+            click.echo(sweep_coherence(d.amplitude, d.from_hz, d.to_hz, d.duration_s, sweep.fps, shape=d.shape,
+                                       noise_deg=noise_deg).summary())
     for warning in sweep.warnings:
         click.echo(f"warning: {warning}", err=True)
     minutes = sweep.total_s / 60
@@ -110,7 +158,13 @@ def drive(plan_file: Path, port: str, protocol: str, device_number: int, baud: i
           led_channel: int, no_led: bool, led_active_low: bool, center_us: float, us_per_unit: float,
           min_us: float, max_us: float, out: Path | None, log_path: Path | None, no_prompt: bool,
           wait_s: float | None, no_realtime: bool) -> None:
-    """Run PLAN on the rig: stream each test to the servo, switch the LED at the input start."""
+    """Run PLAN on the rig: stream each test to the servo, switch the LED at the input start.
+
+    Each test of the plan (a sine dwell, a frequency sweep or a step) is sent
+    as timed commands at the plan's update rate; the LED goes off with the
+    first command of each input. Writes the completed campaign.toml and a
+    command log.
+    """
     from ..errors import ServoscopeError
     from .driver import RigSettings, drive_plan, no_camera_prompt, prompt_camera, wait_camera
     from .plan import read_plan

@@ -5,7 +5,8 @@ For each test of a :class:`~servoscope.rig.plan.SweepPlan`:
 1. servo at centre, LED on; the camera hook asks for the camera to be started;
 2. ``lead_in_s`` with the LED lit, so the video sees it before the input;
 3. at t0, one write carries *LED off* and the first input command; then the
-   input is streamed at ``update_hz`` on an absolute schedule
+   input (a sine, a step, or a sweep's chirp: :meth:`Dwell.input_at
+   <servoscope.rig.plan.Dwell.input_at>`) is streamed at ``update_hz`` on an absolute schedule
    ``t0 + k/update_hz`` (sleep until each instant: no accumulated drift);
 4. the command returns to centre at the end of the input, ``tail_s`` later
    the camera hook asks for the camera to be stopped, the LED goes back on;
@@ -26,6 +27,8 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Protocol as _TypingProtocol
+
+import numpy as np
 
 from ..errors import ServoscopeError
 from .plan import Dwell, SweepPlan, default_video_name, plan_to_toml
@@ -120,8 +123,17 @@ class DriveResult:
     max_late_ms: float
 
 
+def _what(dwell: Dwell) -> str:
+    """``2 Hz sine``, ``log sweep 0.5–20 Hz`` or ``step``."""
+    if dwell.kind == "sine":
+        return f"{dwell.frequency_hz:g} Hz sine"
+    if dwell.kind == "sweep":
+        return f"{dwell.shape or 'log'} sweep {dwell.from_hz:g}–{dwell.to_hz:g} Hz"
+    return "step"
+
+
 def _describe(index: int, n: int, dwell: Dwell, video: str) -> str:
-    what = f"{dwell.frequency_hz:g} Hz sine" if dwell.kind == "sine" else f"step of {dwell.amplitude:g}"
+    what = f"step of {dwell.amplitude:g}" if dwell.kind == "step" else _what(dwell)
     return f"dwell {index}/{n} ({what}, {dwell.duration_s:.3g} s; save as {video})"
 
 
@@ -179,10 +191,10 @@ def check_limits(plan: SweepPlan, settings: RigSettings, protocol: ServoProtocol
     if not math.isfinite(settings.us_per_unit) or settings.us_per_unit == 0:
         raise ServoscopeError(f"--us-per-unit {settings.us_per_unit:g}: must be a non-zero number")
     for i, dwell in enumerate(plan.dwells, start=1):
-        extremes = [dwell.amplitude, -dwell.amplitude] if dwell.kind == "sine" else [dwell.amplitude]
+        extremes = [dwell.amplitude, -dwell.amplitude] if dwell.kind in ("sine", "sweep") else [dwell.amplitude]
         for u in extremes:
             us = settings.command_us(u)
-            what = f"{dwell.frequency_hz:g} Hz sine" if dwell.kind == "sine" else "step"
+            what = _what(dwell)
             if us > settings.max_us:
                 raise ServoscopeError(
                     f"test {i} ({what}, amplitude {dwell.amplitude:g}) would drive the servo to {us:g} µs, "
@@ -348,9 +360,10 @@ def _run_input(rig: _Rig, dwell: Dwell, update_hz: float) -> tuple[float, float]
     settings = rig.settings
     n_updates = math.ceil(dwell.duration_s * update_hz - 1e-9)
     # Precompute every command so that nothing but a write follows each wake-up.
-    # Sample k is the input at t0 + k/update_hz; the last one (k = n_updates,
-    # at or after the input's end) is 0, i.e. centre.
-    targets = [settings.target_qus(dwell.input_at(k / update_hz)) for k in range(n_updates + 1)]
+    # Sample k is the input at t0 + k/update_hz (a sine, a step, or the sweep's chirp);
+    # the last one (k = n_updates, at or after the input's end) is 0, i.e. centre.
+    inputs = np.atleast_1d(dwell.input_at(np.arange(n_updates + 1) / update_hz))
+    targets = [settings.target_qus(float(u)) for u in inputs]
     frames = [rig.servo_bytes(q) for q in targets]
     first: list[tuple[int, int, bytes]] = []
     if settings.led_channel is not None:

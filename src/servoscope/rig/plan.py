@@ -39,6 +39,7 @@ __all__ = [
     "dwell_duration_s",
     "frequency_warnings",
     "fold_hz",
+    "positive_option",
     "read_plan",
     "write_plan",
     "plan_to_toml",
@@ -68,7 +69,7 @@ class Dwell:
     Attributes
     ----------
     kind : str
-        ``"sine"`` or ``"step"``.
+        ``"sine"``, ``"step"`` or ``"sweep"`` (a chirp from ``from_hz`` to ``to_hz``).
     amplitude : float
         Sine amplitude or step size, input units.
     frequency_hz : float or None
@@ -84,6 +85,10 @@ class Dwell:
         Optional label (the manifest's ``label``).
     max_late_ms : float or None
         After driving: the latest any command was sent behind schedule, ms.
+    from_hz, to_hz : float or None
+        A sweep's start and end frequencies, Hz; None otherwise.
+    shape : str or None
+        A sweep's shape, ``"log"`` or ``"linear"``; None otherwise.
     """
 
     kind: str
@@ -94,6 +99,9 @@ class Dwell:
     video: str | None = None
     label: str | None = None
     max_late_ms: float | None = None
+    from_hz: float | None = None
+    to_hz: float | None = None
+    shape: str | None = None
 
     def input_at(self, t_s: float | np.ndarray) -> float | np.ndarray:
         """The planned input u at time ``t_s`` after t0 (0 before t0 and after the dwell).
@@ -106,13 +114,19 @@ class Dwell:
         Returns
         -------
         float or array
-            Input, input units: ``amplitude·sin(2πf·t)`` (sine) or
-            ``amplitude`` (step) for ``0 ≤ t < duration_s``.
+            Input, input units: ``amplitude·sin(2πf·t)`` (sine),
+            ``amplitude`` (step) or the chirp of
+            :func:`servoscope.sysid.inputs.sweep_command` (sweep) for ``0 ≤ t < duration_s``.
         """
         t = np.asarray(t_s, dtype=float)
         on = (t >= 0.0) & (t < self.duration_s)
         if self.kind == "sine":
             u = self.amplitude * np.sin(2.0 * np.pi * float(self.frequency_hz) * t)
+        elif self.kind == "sweep":
+            from ..sysid.inputs import sweep_command
+
+            u = sweep_command(t, self.amplitude, float(self.from_hz), float(self.to_hz), self.duration_s,
+                              self.shape or "log")
         else:
             u = np.full_like(t, self.amplitude)
         out = np.where(on, u, 0.0)
@@ -201,7 +215,8 @@ def dwell_duration_s(frequency_hz: float, periods: float, settle_s: float, min_s
     return n_periods / frequency_hz
 
 
-def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analysed_s: float | None = None) -> list[str]:
+def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analysed_s: float | None = None,
+                       *, ripple: bool = True) -> list[str]:
     """Why a sine dwell at ``frequency_hz`` may measure badly.
 
     Parameters
@@ -216,6 +231,8 @@ def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analys
         Steady-state time the fit sees (duration − settle), s; sets the
         frequency resolution ``1/analysed_s`` of the PWM-ripple check. Without
         it a 2 % band is used.
+    ripple : bool
+        Check for the PWM ripple (a sweep checks its whole band instead: :func:`ripple_warnings`).
 
     Returns
     -------
@@ -245,7 +262,7 @@ def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analys
         )
     # PWM-frame ripple at k·update_hz as the camera sees it.
     tol_hz = max(1.0 / analysed_s, 0.02 * f) if analysed_s and analysed_s > 0 else 0.02 * f
-    for k in range(1, PWM_HARMONICS + 1):
+    for k in range(1, PWM_HARMONICS + 1 if ripple else 1):
         ripple_hz = fold_hz(k * update_hz, fps)
         if abs(f - ripple_hz) < tol_hz:
             harmonic = f"{k}×" if k > 1 else ""
@@ -257,7 +274,8 @@ def frequency_warnings(frequency_hz: float, fps: float, update_hz: float, analys
     return out
 
 
-def _positive(value: float, option: str, *, allow_zero: bool = False) -> float:
+def positive_option(value: float, option: str, *, allow_zero: bool = False) -> float:
+    """``value`` as a float, checked > 0 (≥ 0 with ``allow_zero``); a ServoscopeError naming ``option`` if not."""
     value = float(value)
     if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         raise ServoscopeError(f"{option} {value:g}: must be {'≥ 0' if allow_zero else '> 0'}")
@@ -333,22 +351,22 @@ def plan_sweep(
     ServoscopeError
         For an option out of range (the message names the option).
     """
-    fps = _positive(fps, "--fps")
-    from_hz = _positive(from_hz, "--from")
-    to_hz = _positive(to_hz, "--to")
-    update_hz = _positive(update_hz, "--update-hz")
-    amplitude = _positive(amplitude, "--amplitude")
+    fps = positive_option(fps, "--fps")
+    from_hz = positive_option(from_hz, "--from")
+    to_hz = positive_option(to_hz, "--to")
+    update_hz = positive_option(update_hz, "--update-hz")
+    amplitude = positive_option(amplitude, "--amplitude")
     levels = [amplitude]
     if amplitudes is not None:
-        levels = sorted(_positive(a, "--amplitudes") for a in amplitudes)
+        levels = sorted(positive_option(a, "--amplitudes") for a in amplitudes)
         if not levels or len(set(levels)) != len(levels):
             raise ServoscopeError(f"--amplitudes {','.join(f'{a:g}' for a in amplitudes)}: give distinct amplitudes")
-    periods = _positive(periods, "--periods")
-    min_seconds = _positive(min_seconds, "--min-seconds", allow_zero=True)
-    settle_s = _positive(settle_s, "--settle", allow_zero=True)
-    lead_in_s = _positive(lead_in_s, "--lead-in", allow_zero=True)
-    tail_s = _positive(tail_s, "--tail", allow_zero=True)
-    rest_s = _positive(rest_s, "--rest", allow_zero=True)
+    periods = positive_option(periods, "--periods")
+    min_seconds = positive_option(min_seconds, "--min-seconds", allow_zero=True)
+    settle_s = positive_option(settle_s, "--settle", allow_zero=True)
+    lead_in_s = positive_option(lead_in_s, "--lead-in", allow_zero=True)
+    tail_s = positive_option(tail_s, "--tail", allow_zero=True)
+    rest_s = positive_option(rest_s, "--rest", allow_zero=True)
     if to_hz < from_hz:
         raise ServoscopeError(f"--to {to_hz:g} is below --from {from_hz:g}")
     if int(points) != points or points < 1:
@@ -359,7 +377,7 @@ def plan_sweep(
     if step and (not math.isfinite(step_amplitude) or step_amplitude == 0):
         raise ServoscopeError("--step-amplitude must be ≠ 0 (or use --no-step)")
     if step:
-        step_seconds = _positive(step_seconds, "--step-seconds")
+        step_seconds = positive_option(step_seconds, "--step-seconds")
 
     raw_hz = np.geomspace(from_hz, to_hz, points) if points > 1 else np.array([from_hz])
     # 3 significant digits: readable file names and tables, spacing still log to ±0.5 %.
@@ -383,7 +401,7 @@ def plan_sweep(
 
 
 def default_video_name(index: int, dwell: Dwell, n_steps: int = 1) -> str:
-    """The video name ``drive`` gives a test: ``dwell_01_0.50Hz.mp4`` or ``step.mp4``.
+    """The video name ``drive`` gives a test: ``dwell_01_0.50Hz.mp4``, ``sweep_01_0.5-20Hz.mp4`` or ``step.mp4``.
 
     Parameters
     ----------
@@ -395,6 +413,8 @@ def default_video_name(index: int, dwell: Dwell, n_steps: int = 1) -> str:
     """
     if dwell.kind == "sine":
         return f"dwell_{index:02d}_{dwell.frequency_hz:.2f}Hz.mp4"
+    if dwell.kind == "sweep":
+        return f"sweep_{index:02d}_{dwell.from_hz:g}-{dwell.to_hz:g}Hz.mp4"
     return "step.mp4" if n_steps <= 1 else f"step_{index:02d}.mp4"
 
 
@@ -438,11 +458,19 @@ def plan_campaign(plan: SweepPlan, path: str | Path = "campaign.toml", *, includ
         "tests": [{k: v for k, v in {
             "video": d.video, "label": d.label, "kind": d.kind,
             "frequency_hz": None if d.frequency_hz is None else float(d.frequency_hz),
-            "amplitude": float(d.amplitude)}.items() if v is not None} for d in plan.dwells],
+            "amplitude": float(d.amplitude), **_sweep_keys(d)}.items() if v is not None} for d in plan.dwells],
         "plan": _plan_table(plan),
     })
     campaign = campaign_from_data(data, Path(path), check_videos=False, planned=True, read_files=False)
     return campaign if include_plan else replace(campaign, plan={})
+
+
+def _sweep_keys(d: Dwell) -> dict[str, Any]:
+    """A sweep test's own keys in ``[[tests]]`` (none for a sine or a step)."""
+    if d.kind != "sweep":
+        return {}
+    return {"from_hz": float(d.from_hz), "to_hz": float(d.to_hz), "duration_s": float(d.duration_s),
+            "shape": d.shape or "log"}
 
 
 def plan_to_toml(plan: SweepPlan, *, include_plan: bool = True) -> str:
@@ -498,8 +526,13 @@ def read_plan(path: str | Path) -> SweepPlan:
     plan_t = campaign.plan
     dwells = tuple(
         Dwell(t.kind, t.amplitude, t.frequency_hz, float(extra["duration_s"]), tuple(extra.get("warnings", [])),
-              entry.get("video"), entry.get("label"), extra.get("max_late_ms"))
+              entry.get("video"), entry.get("label"), extra.get("max_late_ms"),
+              *((t.from_hz, t.to_hz, t.shape) if t.kind == "sweep" else ()))
         for t, entry, extra in zip(campaign.tests, test_entries(campaign), plan_t["dwells"], strict=True))
+    for i, (t, d) in enumerate(zip(campaign.tests, dwells), start=1):
+        if t.kind == "sweep" and not math.isclose(t.duration_s, d.duration_s, rel_tol=1e-9):
+            raise ServoscopeError(f"{path}: tests[{i}].duration_s {t.duration_s:g} and plan.dwells[{i}].duration_s "
+                                  f"{d.duration_s:g} disagree (the sweep's length is both)")
     auto = campaign.settle_s == SETTLE_AUTO
 
     def get(key: str, default: float) -> float:

@@ -233,6 +233,8 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
     rec: dict = {"kind": signal.kind}
     if signal.kind == "sine":
         rec["frequency_hz"] = signal.frequency_hz
+    elif signal.kind == "sweep":
+        rec.update(from_hz=signal.from_hz, to_hz=signal.to_hz, duration_s=signal.duration_s, shape=signal.shape)
     rec.update({
         "amplitude": signal.amplitude,
         "t0_s": signal.t0_s,
@@ -329,6 +331,38 @@ def _blur_samples(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarra
     return sub_t, sub_p, e / m
 
 
+def _test_plan(p: CampaignPreset, suffix: str) -> list[tuple[str, str, float | None, float]]:
+    """(video name, kind, frequency, amplitude) per test, in recording order: the dwells, a sweep, the step."""
+    if p.sine_amplitudes:
+        pairs = [(f, a) for f in p.frequencies_hz for a in p.sine_amplitudes]
+        plan: list[tuple[str, str, float | None, float]] = [
+            (f"dwell_{k + 1:02d}_{f:.2f}Hz_a{a:g}{suffix}", "sine", f, a) for k, (f, a) in enumerate(pairs)]
+    else:
+        plan = [(f"dwell_{k + 1:02d}_{f:.2f}Hz{suffix}", "sine", f, p.sine_amplitude)
+                for k, f in enumerate(p.frequencies_hz)]
+    if p.sweep is not None:
+        plan.append((f"sweep_{p.sweep[0]:.2f}-{p.sweep[1]:.2f}Hz{suffix}", "sweep", None, p.sine_amplitude))
+    if p.include_step:
+        plan.append((f"step{suffix}", "step", None, p.step_amplitude))
+    return plan
+
+
+def _test_signal(p: CampaignPreset, kind: str, freq: float | None, amplitude: float, t0: float
+                 ) -> tuple[InputSignal, float]:
+    """A test's input starting at ``t0`` and the length of its video."""
+    if kind == "sine":
+        signal = InputSignal("sine", amplitude, freq, t0_s=t0)
+        duration = p.dwell_duration_s(freq, t0)
+    elif kind == "sweep":
+        signal = InputSignal("sweep", amplitude, t0_s=t0, from_hz=p.sweep[0], to_hz=p.sweep[1],
+                             duration_s=p.sweep[2], shape=p.sweep_shape)
+        duration = p.sweep_video_duration_s(t0)
+    else:
+        signal = InputSignal("step", p.step_amplitude, t0_s=t0)
+        duration = t0 + p.step_after_t0_s
+    return signal, duration
+
+
 def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, *,
                       progress: Callable[[int, int, str], None] | None = None, **overrides) -> Path:
     """Simulate a whole measurement campaign with a known answer.
@@ -348,7 +382,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         ``width=360, height=288, fps=50, codec="raw", bit_rate=8_000_000,
         noise_sigma_dn=0, frequencies_hz=(1.0, 2.0), servo=ServoModel(...)``;
         ``readout_s=0.015`` (with ``fps=50, exposure_s=0.02``) films with a
-        rolling shutter (see docs/twin.md).
+        rolling shutter (see docs/twin.md); ``sweep=(from_hz, to_hz, duration_s)``
+        (and ``sweep_shape="linear"``) adds a frequency-sweep test.
 
     Returns
     -------
@@ -395,16 +430,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
 
-    # (video name, kind, frequency, sine amplitude) per test, in recording order.
-    if p.sine_amplitudes:
-        pairs = [(f, a) for f in p.frequencies_hz for a in p.sine_amplitudes]
-        plan: list[tuple[str, str, float | None, float]] = [
-            (f"dwell_{k + 1:02d}_{f:.2f}Hz_a{a:g}{suffix}", "sine", f, a) for k, (f, a) in enumerate(pairs)]
-    else:
-        plan = [(f"dwell_{k + 1:02d}_{f:.2f}Hz{suffix}", "sine", f, p.sine_amplitude)
-                for k, f in enumerate(p.frequencies_hz)]
-    if p.include_step:
-        plan.append((f"step{suffix}", "step", None, p.step_amplitude))
+    plan = _test_plan(p, suffix)
     streams = np.random.SeedSequence(seed).spawn(len(plan))
 
     tests = []
@@ -422,12 +448,7 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
             frac = p.t0_frame_phase  # drawn all the same: the noise seeds keep their values
         t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
         noise_seed = int(rng.integers(0, 2**63 - 1))
-        if kind == "sine":
-            signal = InputSignal("sine", amplitude, freq, t0_s=t0)
-            duration = p.dwell_duration_s(freq, t0)
-        else:
-            signal = InputSignal("step", p.step_amplitude, t0_s=t0)
-            duration = t0 + p.step_after_t0_s
+        signal, duration = _test_signal(p, kind, freq, amplitude, t0)
         rec = render_test(out / name, p, scene, signal, duration, noise_seed)
         tests.append({"video": name, **rec})
 

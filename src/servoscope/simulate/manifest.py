@@ -45,7 +45,8 @@ def twin_campaign(p: CampaignPreset, scene: Scene, tests: list[dict], path: Path
     scene : Scene
         What was filmed (the markers' colours, the extra stickers).
     tests : list of dict
-        Each recording's ``video`` (name in the folder), ``kind``, ``frequency_hz`` (sines) and ``amplitude``.
+        Each recording's ``video`` (name in the folder), ``kind``, ``frequency_hz`` (sines), ``from_hz``,
+        ``to_hz``, ``duration_s`` and ``shape`` (sweeps) and ``amplitude``.
     path : Path
         The manifest file.
     frames_fps : Fraction, optional
@@ -56,8 +57,10 @@ def twin_campaign(p: CampaignPreset, scene: Scene, tests: list[dict], path: Path
     specs = []
     for t in tests:
         video, frames = _recording(p, folder, t["video"], frames_fps)
+        sweep = ({"from_hz": float(t["from_hz"]), "to_hz": float(t["to_hz"]), "duration_s": float(t["duration_s"]),
+                  "shape": t["shape"]} if t["kind"] == "sweep" else {})
         specs.append(TestSpec(video, t["kind"], float(t["amplitude"]),
-                              float(t["frequency_hz"]) if t["kind"] == "sine" else None, frames=frames))
+                              float(t["frequency_hz"]) if t["kind"] == "sine" else None, frames=frames, **sweep))
     # Monochrome footage: every marker (and the LED) told by brightness.
     lead, trail, led = (("bright",) * 3 if p.monochrome else (scene.lead_colour, scene.trail_colour, scene.led_colour))
     campaign = Campaign(

@@ -13,6 +13,7 @@ from ..camera.model import CameraModel
 from ..defaults import EXTRA_COLOURS, SETTLE_S, TIMESTAMP, TIMESTAMPS
 from ..errors import ServoscopeError
 from .scene import REFERENCE_SIZE, Scene
+from ..sysid.inputs import sweep_problems
 from .servo import ServoModel
 from .view import ObliqueView
 
@@ -203,6 +204,14 @@ class CampaignPreset:
         Add what the LED is mistaken for: a specular glint by the hub, brighter
         and larger than the LED (in its hue), and a screw head brighter than the
         LED's off level.
+    sweep : (float, float, float) or None
+        A frequency-sweep test ``(from_hz, to_hz, duration_s)`` after the dwells (before
+        the step), of amplitude ``sine_amplitude`` and shape ``sweep_shape``: the LED
+        switches at its start, which comes ``pre_roll_s`` (and a fraction of a frame)
+        into the video, and the video goes on ``settle_s`` after the sweep ends. None
+        (the default): no sweep.
+    sweep_shape : {"log", "linear"}
+        The sweep's frequency law (:func:`servoscope.sysid.inputs.sweep_command`).
     """
 
     name: str
@@ -263,9 +272,25 @@ class CampaignPreset:
     led_place: str = "blade"
     led_xy_px: tuple[float, float] | None = None
     led_distractors: bool = False
+    sweep: tuple[float, float, float] | None = None
+    sweep_shape: str = "log"
 
     def __post_init__(self) -> None:
         self._check_camera_options()
+        if self.sweep is not None:
+            try:
+                lo, hi, dur = (float(v) for v in self.sweep)
+            except (TypeError, ValueError):
+                raise ServoscopeError(f"sweep must be (from_hz, to_hz, duration_s), not {self.sweep!r}") from None
+            problems = sweep_problems(lo, hi, dur, self.sweep_shape)
+            if problems:
+                raise ServoscopeError("sweep: " + "; ".join(f"{k}: {m}" for k, m in problems))
+            object.__setattr__(self, "sweep", (lo, hi, dur))
+            fps = float(Fraction(self.fps).limit_denominator(1_000_000))
+            if hi >= 0.5 * fps:
+                raise ServoscopeError(f"sweep: to_hz ({hi:g} Hz) must be below half the frame rate ({fps:g} frames/s)")
+        elif self.sweep_shape not in ("log", "linear"):
+            raise ServoscopeError(f"sweep_shape must be 'log' or 'linear', not {self.sweep_shape!r}")
         if self.led_place not in ("blade", "stand"):
             raise ServoscopeError(f"led_place must be 'blade' or 'stand', not {self.led_place!r}")
         if self.led_place == "stand" and (self.readout_s > 0 or self.motion_blur):
@@ -284,7 +309,7 @@ class CampaignPreset:
         object.__setattr__(self, "frequencies_hz", freqs)
         if self.exposure_s is None:
             object.__setattr__(self, "exposure_s", 1.0 / float(Fraction(self.fps).limit_denominator(1_000_000)))
-        if not freqs and not self.include_step:
+        if not freqs and not self.include_step and self.sweep is None:
             raise ServoscopeError("a campaign needs at least one test")
         if not (self.noise_sigma_dn >= 0 and self.exposure_s >= 0 and self.pre_roll_s >= 0 and self.settle_s >= 0):
             raise ServoscopeError("noise_sigma_dn, exposure_s, pre_roll_s and settle_s must be >= 0")
@@ -372,6 +397,10 @@ class CampaignPreset:
         """Length of the sine dwell at ``frequency_hz`` that starts at ``t0_s``."""
         return t0_s + self.settle_s + max(self.min_dwell_s, self.min_periods / frequency_hz)
 
+    def sweep_video_duration_s(self, t0_s: float) -> float:
+        """Length of the sweep test's video whose input starts at ``t0_s``: the sweep, then ``settle_s``."""
+        return t0_s + self.sweep[2] + self.settle_s
+
     def camera(self) -> CameraModel:
         """The true camera, its intrinsics scaled from the reference size."""
         s = min(self.width / REFERENCE_SIZE[0], self.height / REFERENCE_SIZE[1])
@@ -421,6 +450,10 @@ PRESETS["paper-bend"] = replace(PRESETS["paper-flap"], name="paper-bend", blade_
 # differ from the large ones': what the paper saw, and what `identify --nonlinear auto` explains.
 PRESETS["paper-nonlinear"] = replace(PRESETS["paper"], name="paper-nonlinear",
                                      servo=replace(PAPER_SERVO, backlash=0.012), sine_amplitudes=(0.1, 0.3))
+# A sweep instead of the dwells (issue 31): the paper's servo and camera, one 12 s logarithmic sweep
+# from 0.5 to 15 Hz (the dwells' span) at the dwells' amplitude, after the same lead-in.
+PRESETS["paper-sweep"] = replace(PRESETS["paper"], name="paper-sweep", frequencies_hz=(), include_step=False,
+                                 sweep=(0.5, 15.0, 12.0))
 
 
 def get_preset(name: str) -> CampaignPreset:

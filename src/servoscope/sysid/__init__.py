@@ -37,6 +37,7 @@ from servoscope.sysid.linearity import AmplitudeCheck, gain_against_amplitude
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
 from servoscope.sysid.sine import SineFit, fit_sine, hac_covariance, rigid_motion_null
 from servoscope.sysid.step import StepAnalysis, analyse_step, model_step_metrics
+from servoscope.sysid.sweep import SweepResponse, sweep_response
 from servoscope.sysid.tf_fit import (
     TransferFunctionFit,
     bandwidth_rad_s,
@@ -55,6 +56,7 @@ __all__ = [
     "Parameters",
     "SineFit",
     "StepAnalysis",
+    "SweepResponse",
     "TransferFunctionFit",
     "analyse_step",
     "bandwidth_rad_s",
@@ -71,5 +73,6 @@ __all__ = [
     "model_step_metrics",
     "rigid_motion_null",
     "select_order",
+    "sweep_response",
     "with_gain_scale_uncertainty",
 ]
