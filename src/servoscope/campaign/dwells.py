@@ -14,7 +14,7 @@ from ..sysid import FrequencyResponse, SineFit, fit_sine, gain_against_amplitude
 from .manifest import Campaign, TestSpec
 from .result import input_start, input_start_stderr
 
-__all__ = ["amplitude_checks", "dwell_response", "fit_dwell", "fit_dwells", "fit_mode"]
+__all__ = ["amplitude_checks", "dwell_response", "exposure_corrected", "fit_dwell", "fit_dwells", "fit_mode"]
 
 
 def fit_dwell(campaign: Campaign, test: TestSpec, track: Track, own_t0_stderr: dict[str, float],
@@ -49,8 +49,9 @@ def fit_dwell(campaign: Campaign, test: TestSpec, track: Track, own_t0_stderr: d
 
 
 def fit_dwells(campaign: Campaign, tracks: dict[str, Track], own_t0_stderr: dict[str, float], order,
-                warnings: list[str]) -> tuple[dict[str, SineFit], list[float]]:
-    """Every sine dwell's fit, in manifest order, and its input amplitude; refused with fewer than 3."""
+                warnings: list[str], sweep_points: int = 0) -> tuple[dict[str, SineFit], list[float]]:
+    """Every sine dwell's fit, in manifest order, and its input amplitude; refused with fewer than 3 points
+    (the dwells' and `sweep_points`, the sweeps' frequencies with coherence ≥ 0.6)."""
     fits: dict[str, SineFit] = {}
     amplitudes = []
     for test in campaign.sine_tests:
@@ -58,11 +59,13 @@ def fit_dwells(campaign: Campaign, tracks: dict[str, Track], own_t0_stderr: dict
         if sine_fit is not None:
             fits[test.label] = sine_fit
             amplitudes.append(test.amplitude)
-    if len(fits) < 3:
+    if len(fits) + sweep_points < 3:
         asked = "its order chosen from the data" if order == "auto" else f"order (nb, na) = {order}"
+        sweeps = f" and {sweep_points} coherent sweep frequenc{'y' if sweep_points == 1 else 'ies'}" \
+            if campaign.sweep_tests else ""
         raise ServoscopeError(
-            f"{campaign.path}: only {len(fits)} sine dwell(s) could be fitted; identify fits a model ({asked}) "
-            "to 3 or more, whatever its order"
+            f"{campaign.path}: only {len(fits)} sine dwell(s){sweeps} could be fitted; identify fits a model "
+            f"({asked}) to 3 or more frequencies, whatever its order (the warnings say why each test was left out)"
         )
     return fits, amplitudes
 
@@ -70,7 +73,12 @@ def fit_dwells(campaign: Campaign, tracks: dict[str, Track], own_t0_stderr: dict
 def dwell_response(campaign: Campaign, fits: dict[str, SineFit], amplitudes: list[float],
                         exposure: ExposureEstimate) -> FrequencyResponse:
     """The dwells' frequency response, corrected for the exposure given or seen in the blur."""
-    fr = FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes), list(fits))
+    return exposure_corrected(campaign, FrequencyResponse.from_sine_fits(list(fits.values()), np.asarray(amplitudes),
+                                                                         list(fits)), exposure)
+
+
+def exposure_corrected(campaign: Campaign, fr: FrequencyResponse, exposure: ExposureEstimate) -> FrequencyResponse:
+    """`fr` corrected for the exposure given or seen in the blur (the dwells' and the sweeps' alike)."""
     if campaign.exposure_s is not None:
         return fr.corrected_for_exposure(campaign.exposure_s)
     if exposure.known and "blur" in exposure.source:

@@ -8,7 +8,7 @@ hold, save and look at a result without the stage that produced it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
@@ -30,6 +30,7 @@ from ..sysid.servo_select import ServoModelSelection
 from ..sysid.servo_sim import NONLINEAR_PARAMETER
 from ..sysid.dead_time import DeadTimeEstimate, dead_time_estimates
 from ..sysid.step import unit_step_function
+from ..sysid.sweep_result import SweepResponse
 from .headline import SOURCE_KEYS, TIME_DOMAIN_KEY, Headline, chosen_dead_time, headline
 from .manifest import Campaign, TestSpec
 
@@ -143,6 +144,9 @@ class IdentificationResult:
         The plane the angles were measured in (its summary: file, view angle, reprojection
         error, angle-gain uncertainty), ``{"source": "self-calibrated (stickers' shapes)"}`` after
         ``self_calibrate_plane``; None: the image.
+    sweeps : mapping of label → SweepResponse
+        Each frequency sweep's spectral response with coherence (:mod:`servoscope.campaign.sweeps`);
+        its points with coherence ≥ 0.6 are in `frequency_response` beside the dwells'.
     """
 
     campaign: Campaign
@@ -164,12 +168,13 @@ class IdentificationResult:
     heave_model: HeaveModel | None = None
     view: ObliqueView | None = None
     plane: dict | None = None
+    sweeps: Mapping[str, SweepResponse] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # Lists given (the runner's, a notebook's) kept as tuples, dicts as read-only views of a copy.
         for name in ("warnings", "amplitude_checks", "modes", "heave_response", "bending_response"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
-        for name in ("tracks", "sine_fits"):
+        for name in ("tracks", "sine_fits", "sweeps"):
             object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
 
     @property
@@ -258,6 +263,8 @@ class IdentificationResult:
                 "t0_uncertainty_s": input_start_stderr(test, track),
                 "warnings": list(track.warnings),
             }
+            if test.kind == "sweep":
+                entry.update(from_hz=test.from_hz, to_hz=test.to_hz, duration_s=test.duration_s, shape=test.shape)
             pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
             entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
             if track.reference_angle_rad is not None:
@@ -292,6 +299,7 @@ class IdentificationResult:
                 **({"plane": self.plane} if self.plane is not None else {}),
                 **({"extra_markers": list(self.campaign.extra)} if self.campaign.extra else {}),
                 "frequency_response": self.frequency_response.summary(),
+                **({"sweeps": {k: v.summary() for k, v in self.sweeps.items()}} if self.sweeps else {}),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
                                                         **self._step_fits()},
                 "tests": tests,
@@ -469,7 +477,8 @@ class IdentificationResult:
                             warnings=tuple(w for w in entry.get("warnings", []) if w not in fit_warnings), **more)
             tracks[label] = track
             tests.append(TestSpec(video=Path(entry["video"]), kind=entry["kind"], amplitude=entry["amplitude"],
-                                  frequency_hz=entry.get("frequency_hz"), label=label))
+                                  frequency_hz=entry.get("frequency_hz"), label=label,
+                                  **{k: entry[k] for k in ("from_hz", "to_hz", "duration_s", "shape") if k in entry}))
             if sf is not None:
                 lo, hi = sf["window_s"]
                 inside = track.valid & (track.angle_time_s >= lo) & (track.angle_time_s <= hi)
@@ -511,7 +520,8 @@ class IdentificationResult:
             bending_response=[HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
             heave_model=None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]),
             view=None if data.get("view") is None else ObliqueView.from_summary(data["view"]),
-            plane=data.get("plane"))
+            plane=data.get("plane"),
+            sweeps={k: SweepResponse.from_summary(v) for k, v in (data.get("sweeps") or {}).items()})
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:
         """The Bode plot: the dwells' gains (±1 standard error) and the fitted model's.

@@ -22,12 +22,13 @@ from ..sysid import FrequencyResponse, SineFit, check_held, fit_transfer_functio
 from ..sysid.dead_time import dead_time_estimates
 from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
                     step_ringdown_warning)
-from .dwells import amplitude_checks, dwell_response, fit_dwells, fit_mode
+from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dwells, fit_mode
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
 from .result import IdentificationResult
 from .step_test import step_test
+from .sweeps import combined_response, sweep_responses, sweeps_t0_stderr
 
 __all__ = ["IdentificationResult", "checked_holds", "identify", "led_coverage_warning", "track_campaign"]
 
@@ -463,10 +464,14 @@ def identify(
     shared_t0_s, own_t0_stderr = shared_t0_stderr(campaign.sine_tests, tracks)
     _add_tracking_warnings(campaign, tracks, warnings)
 
-    fits, amplitudes = fit_dwells(campaign, tracks, own_t0_stderr, order, warnings)
-    fr = dwell_response(campaign, fits, amplitudes, exposure)
+    sweeps = sweep_responses(campaign, tracks, warnings)
+    shared_t0_s = max(shared_t0_s, sweeps_t0_stderr(campaign, tracks, sweeps))
+    fits, amplitudes = fit_dwells(campaign, tracks, own_t0_stderr, order, warnings,
+                                  sum(int(np.count_nonzero(s.kept)) for s in sweeps.values()))
+    dwells = dwell_response(campaign, fits, amplitudes, exposure) if fits else None
+    fr = combined_response(dwells, sweeps, lambda r: exposure_corrected(campaign, r, exposure)) if sweeps else dwells
     mode = fit_mode(fit, fr, campaign)
-    checks = amplitude_checks(fr, fits, amplitudes, tracks)
+    checks = amplitude_checks(dwells, fits, amplitudes, tracks) if dwells is not None else []
     warnings.extend(w for w in (c.warning() for c in checks) if w)
     model = _fit_model(fr, order, mode, bootstrap, held, scale_error)
     warnings.extend(fr.warnings)
@@ -493,4 +498,4 @@ def identify(
         step_label=step_label, warnings=warnings, exposure=exposure, shared_t0_stderr_s=shared_t0_s,
         amplitude_checks=checks, modes=blade.modes, servo_model=selection,
         predicted_step_fit_percent=predicted, heave_response=blade.heave, bending_response=blade.bending,
-        heave_model=blade.flapping, view=view, plane=plane_summary(campaign, tracks))
+        heave_model=blade.flapping, view=view, plane=plane_summary(campaign, tracks), sweeps=sweeps)

@@ -12,6 +12,7 @@ from .figures import (amplitude_figure, blade_frame_figure, bode_figure, candida
                       heave_figure, overlay_figure, servo_traces_figure, step_figure)
 from .html import ReportSection, render_html
 from .plane_section import plane_section
+from .sweep_section import sweep_section
 from ..numbers import format_interval, format_value, format_with_uncertainty
 from ..camera.plane_map import recorded_points
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -106,6 +107,7 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     sections = [
         model_section(result, summary, figures_dir),
         frequency_response_section(result, figures_dir),
+        sweep_section(result, figures_dir),
         plane_section(result, figures_dir),
         _blade_section(result, figures_dir) if result.modes or result.heave_response or result.bending_response
         else None,
@@ -303,8 +305,11 @@ def frequency_response_section(result: "IdentificationResult", figures_dir) -> R
     return s
 
 
-def dwell_section(result: "IdentificationResult", figures_dir) -> ReportSection:
-    """One dwell's trace with its fitted sine (the dwell nearest the bandwidth), then every dwell's thumbnail."""
+def dwell_section(result: "IdentificationResult", figures_dir) -> ReportSection | None:
+    """One dwell's trace with its fitted sine (the dwell nearest the bandwidth), then every dwell's thumbnail;
+    None for a campaign without dwells (a sweep's)."""
+    if not result.sine_fits:
+        return None
     label = _representative_dwell(result)
     fit = result.sine_fits[label]
     track = result.tracks[label]

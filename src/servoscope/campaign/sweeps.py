@@ -1,0 +1,101 @@
+"""A campaign's frequency sweeps: each one's spectral frequency response, and one response from every test.
+
+Steps of :func:`servoscope.campaign.runner.identify` (issue 31). A sweep's input is known (the
+chirp of its ``[[tests]]`` entry, :meth:`~servoscope.campaign.manifest.TestSpec.command`)
+from the instant the LED dates; its output is the tracked angle. :func:`sweep_responses`
+turns each into a :class:`~servoscope.sysid.sweep_result.SweepResponse` (CIFER's composite
+of windowed cross-spectra with coherence, :func:`servoscope.sysid.sweep.sweep_response`);
+:func:`combined_response` puts the sweeps' points with coherence ≥ 0.6 beside the dwells', each
+with its own error, for one transfer-function fit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import ServoscopeError
+from ..markers.track import Track
+from ..sysid import FrequencyResponse
+from ..sysid.sweep import sweep_response
+from ..sysid.sweep_result import SweepResponse
+from .manifest import Campaign
+from .result import input_start, input_start_stderr
+
+__all__ = ["combined_response", "sweep_responses", "sweeps_t0_stderr"]
+
+
+def sweep_responses(campaign: Campaign, tracks: dict[str, Track], warnings: list[str]) -> dict[str, SweepResponse]:
+    """Each sweep test's frequency response, by label; a sweep that cannot give one is left out with a warning
+    that says why (no input start, too few valid frames, a gap, no coherent frequency)."""
+    out: dict[str, SweepResponse] = {}
+    for test in campaign.sweep_tests:
+        track = tracks[test.label]
+        t0 = input_start(test, track)
+        if t0 is None:
+            warnings.append(f"{test.label}: sweep left out: no input start (the LED's switch or t0_s): its input "
+                            "cannot be dated, so neither its gain nor its phase can be measured")
+            continue
+        y = np.where(track.valid, track.angle_rad, np.nan)
+        try:
+            response = sweep_response(track.angle_time_s, test.command(track.angle_time_s - t0), y,
+                                      from_hz=float(test.from_hz), to_hz=float(test.to_hz))
+            response.to_frequency_response()  # refuses a sweep with no coherent frequency, named below
+        except ServoscopeError as exc:
+            warnings.append(f"{test.label}: sweep left out: {exc}")
+            continue
+        out[test.label] = response
+        warnings.extend(f"{test.label}: {w}" for w in response.warnings)
+        low = int(np.count_nonzero(~response.kept))
+        if low:
+            warnings.append(f"{test.label}: {low} of {len(response)} frequencies have coherence below "
+                            f"{response.coherence_min:g} (the output there is not the input's): left out of the fit")
+    return out
+
+
+def sweeps_t0_stderr(campaign: Campaign, tracks: dict[str, Track], sweeps: dict[str, SweepResponse]) -> float:
+    """The input-start error every point of a sweep shares (its one LED switch), the largest over the sweeps, s.
+
+    A sweep's phases all hang on its one t0: like the dwells' shared error it is added to the
+    phase dead time's, not averaged away by the number of frequencies.
+    """
+    errors = [input_start_stderr(t, tracks[t.label]) or 0.0 for t in campaign.sweep_tests if t.label in sweeps]
+    return float(max(errors, default=0.0))
+
+
+def combined_response(dwells: FrequencyResponse | None, sweeps: dict[str, SweepResponse],
+                      correct: Callable[[FrequencyResponse], FrequencyResponse] | None = None) -> FrequencyResponse:
+    """The dwells' points and every sweep's kept points, sorted by frequency, each with its own error.
+
+    `correct` is applied to each sweep's points first (the exposure's correction, which the
+    dwells' response already has).
+
+    Raises
+    ------
+    ServoscopeError
+        With neither dwells nor a sweep (the caller says what the campaign lacked).
+    """
+    parts = [] if dwells is None else [dwells]
+    for label, s in sweeps.items():
+        # Its warnings were said once, under its label (sweep_responses).
+        part = replace(s.to_frequency_response(label), warnings=())
+        parts.append(part if correct is None else correct(part))
+    if not parts:
+        raise ServoscopeError("no dwell and no sweep gave a frequency response")
+    if len(parts) == 1:
+        return parts[0]
+    f = np.concatenate([p.frequency_hz for p in parts])
+    order = np.argsort(f, kind="stable")
+
+    def col(name: str) -> np.ndarray:
+        return np.concatenate([np.asarray(getattr(p, name), dtype=float) for p in parts])[order]
+
+    labels = [label for p in parts for label in p.labels]
+    flags = [fl for p in parts for fl in p.flags]
+    return FrequencyResponse(
+        frequency_hz=f[order], gain=col("gain"), gain_stderr=col("gain_stderr"), phase_deg=col("phase_deg"),
+        phase_stderr_deg=col("phase_stderr_deg"), fidelity=col("fidelity"), labels=tuple(labels[i] for i in order),
+        frequency_stderr_hz=col("frequency_stderr_hz"), thd=col("thd"), flags=tuple(flags[i] for i in order),
+        warnings=tuple(w for p in parts for w in p.warnings))

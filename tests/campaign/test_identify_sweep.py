@@ -1,0 +1,64 @@
+"""Identification from a frequency sweep (issue 31, build 3): one recording, the whole frequency response.
+
+Oracle: the twin's truth (its servo: K = 0.23, ωn = 37 rad/s, ζ = 0.65, dead time 85 ms). The
+campaign is small on purpose (320×256 raw frames, a 6 s sweep and two dwells): the same code runs
+on the 12 s paper-sweep preset (docs/accuracy.md gives its figures).
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from servoscope.campaign import identify
+from servoscope.campaign.result import IdentificationResult
+from servoscope.simulate import simulate_campaign
+
+from support import run_cli
+
+TRUTH = {"gain": 0.23, "natural_frequency_rad_s": 37.0, "damping_ratio": 0.65, "dead_time_s": 0.085}
+
+
+@pytest.fixture(scope="module")
+def sweep_campaign(tmp_path_factory):
+    """A 6 s log sweep 0.5–12 Hz beside two dwells (2 and 8 Hz), no step, with a second of rest around the sweep."""
+    return simulate_campaign(tmp_path_factory.mktemp("sweep") / "c", "quick", 2, width=320, height=256, codec="raw",
+                             frequencies_hz=(2.0, 8.0), include_step=False, sweep=(0.5, 12.0, 6.0),
+                             pre_roll_s=1.0, settle_s=1.0)
+
+
+def test_a_sweep_and_two_dwells_give_one_response_and_the_servo(sweep_campaign):
+    result = identify(sweep_campaign, workers=1)
+    fr = result.frequency_response
+    (label, sweep), = result.sweeps.items()
+    sweep_points = [lab for lab in fr.labels if lab.startswith(label)]
+    dwell_points = [lab for lab in fr.labels if not lab.startswith(label)]
+    # One response: every coherent sweep frequency and both dwells, sorted by frequency.
+    assert len(dwell_points) == 2 and len(sweep_points) == int(sweep.kept.sum()) >= 10
+    assert list(fr.frequency_hz) == sorted(fr.frequency_hz)
+    assert min(sweep.coherence[sweep.kept]) >= 0.6
+    p = result.parameters
+    for name, true in TRUTH.items():
+        assert p[name].holds(true), (name, p[name], true)
+    assert abs(p["gain"].value - 0.23) < 0.005 * 0.23
+    assert abs(p["natural_frequency_rad_s"].value - 37.0) < 0.01 * 37.0
+    assert abs(p["damping_ratio"].value - 0.65) < 0.02 * 0.65
+    assert abs(p["dead_time_s"].value - 0.085) < 0.001
+
+
+def test_the_command_writes_the_sweep_and_reads_it_back(sweep_campaign, tmp_path):
+    out = tmp_path / "out"
+    run = run_cli("identify", str(sweep_campaign), "--out", str(out), "--workers", "1")
+    assert run.returncode == 0, run.stderr
+    data = json.loads((out / "result.json").read_text())
+    (label, sweep), = data["sweeps"].items()
+    assert len(sweep["frequency_hz"]) == len(sweep["coherence"]) == len(sweep["kept"])
+    entry = next(t for t in data["tests"] if t["kind"] == "sweep")
+    assert (entry["from_hz"], entry["to_hz"], entry["duration_s"], entry["shape"]) == (0.5, 12.0, 6.0, "log")
+    report = (out / "report.html").read_text()
+    assert "Frequency sweeps" in report and "coherence" in report
+    assert (out / "figures" / f"{label}_response.png").exists() and (out / "figures" / f"{label}_time.png").exists()
+    again = IdentificationResult.load(out)
+    assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)
+    assert "gain K" in run.stdout  # the headline table
