@@ -44,3 +44,32 @@ def backlash_identified(tmp_path_factory):
     result = identify(toml, workers=1, nonlinear="auto")
     write_report(result, root / "out")
     return result, root / "out", servo
+
+
+# The files that take longest, longest first (pytest --durations=0 on the 2-core machine, 2026-11-26):
+# `make test` hands whole files to its two workers in collection order, so starting the long ones first
+# lets the short ones fill in at the end and both workers finish together (longest processing time first).
+LONGEST_FIRST = [
+    "campaign/test_identify_twin_h264.py", "campaign/test_identify_twin_raw.py", "campaign/test_identify_twin_h264_gop.py",
+    "sysid/test_servo_selection.py", "test_identify_command.py", "video/test_video_formats.py",
+    "camera/test_timing_honesty.py", "campaign/test_joint.py", "sysid/test_sysid_identify.py",
+    "campaign/test_joint_linear.py", "markers/test_gpu.py", "campaign/test_identify_twin_mpeg2.py",
+    "campaign/test_interrupted_run.py", "camera/test_exposure_blur.py", "sysid/test_linearity.py",
+    "markers/test_marker_selection.py", "video/test_bad_videos.py", "markers/test_monochrome.py",
+    "campaign/test_plane_twin.py", "video/test_memory.py", "sysid/test_modes.py",
+    "simulate/test_twin_image_sequence.py", "campaign/test_end_to_end.py", "report/test_report_browser.py",
+]
+
+
+def pytest_collection_modifyitems(session, config, items):
+    here = Path(__file__).resolve().parent
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+
+    def order(item) -> int:
+        try:
+            name = Path(str(item.path)).resolve().relative_to(here).as_posix()
+        except ValueError:
+            return len(rank)
+        return rank.get(name, len(rank))
+
+    items.sort(key=order)  # stable: within a file, and among the rest, collection order stays

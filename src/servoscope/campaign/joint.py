@@ -1,29 +1,43 @@
-"""The campaign's tests as whole traces, for one model of the sines and the step (issue 17).
+"""The campaign's tests as whole traces, for one model of the sines, the sweeps and the step (issues 17, 31).
 
 :func:`servo_model` turns each tracked test into a :class:`~servoscope.sysid.servo_sim.ServoTrace`
 (its valid angles, input start, measured noise and the camera's exposure) and runs
 :func:`~servoscope.sysid.servo_fit.select_servo_model`: the linear model and the nonlinear
-structures asked for, fitted to the dwells and the step together, selected by BIC and
-cross-validated. :func:`check_nonlinear` refuses, before any tracking, what cannot work.
+structures asked for, fitted to the dwells, the sweeps and the step together, selected by BIC
+and cross-validated. :func:`check_nonlinear` refuses, before any tracking, what cannot work.
+
+What a campaign can tell apart
+------------------------------
+Every test's input start is known (the LED's switch or the manifest's t0), so the dead time
+is measured by the dwells' and the sweeps' phases as well as by a step: no step is needed.
+A nonlinearity shows in how the response changes with the input: a rate limit where the
+commanded slew ``K·A·2πf`` exceeds it (a large amplitude at a high frequency, a sweep's top, a
+step's edge), backlash where the swing is small beside the play, so dwells at two amplitudes,
+a sweep or a step each show them. :func:`identifiability_warnings` says what a campaign
+without a step cannot rule out: with one input amplitude only, a structure shows only in
+its waveform's harmonics and in how it changes with frequency, and a rate limit above the
+fastest slew any test commands never bites.
 """
 
 from __future__ import annotations
 
 import math
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import ServoscopeError
 from ..markers.track import Track
 from ..parameters import check_held, tie_names
-from ..sysid.servo_fit import check_servo_held, fit_percent
+from ..sysid.servo_fit import ServoModelFit, check_servo_held, fit_percent
 from ..sysid.servo_select import ServoModelSelection, select_servo_model
 from ..sysid.servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, STRUCTURES, ServoTrace, simulate_trace
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["NONLINEAR_CHOICES", "check_nonlinear", "predicted_step_fit_percent", "servo_model", "servo_traces",
-           "split_held"]
+__all__ = ["NONLINEAR_CHOICES", "check_nonlinear", "identifiability_warnings", "predicted_step_fit_percent",
+           "servo_model", "servo_traces", "split_held"]
 
 #: What ``identify --nonlinear`` takes: none (the frequency-domain fit alone), auto (every
 #: structure, selected by BIC), or one structure (fitted beside the linear model).
@@ -52,7 +66,8 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
     ------
     ServoscopeError
         An unknown structure; a nonlinear parameter held without its structure; a nonlinear
-        structure without a step test or with fewer dwells than parameters; a model order
+        structure with fewer dwells than parameters and no sweep (a step is not needed: see the
+        module's description); a model order
         other than the 2nd-order one the time-domain models are built on; a tie without a
         time-domain fit, or one naming an unknown parameter.
     """
@@ -80,14 +95,12 @@ def check_nonlinear(campaign: Campaign, nonlinear: str, order, fix: dict[str, fl
                               f"use --order 2 (not {order})")
     if nonlinear == "linear":
         return
-    if not campaign.step_tests:
-        raise ServoscopeError(f"{campaign.path}: --nonlinear {nonlinear} needs a step test beside the dwells (a "
-                              "nonlinearity shows in how a large, sudden input differs from the sines); add one, or "
-                              "use --nonlinear linear")
     n_params = len(LINEAR_PARAMETERS) + 1
-    if len(campaign.sine_tests) < n_params:
+    # A sweep's response spans its band at many frequencies: enough for the parameters by itself.
+    if len(campaign.sine_tests) < n_params and not campaign.sweep_tests:
         raise ServoscopeError(f"{campaign.path}: --nonlinear {nonlinear} fits {n_params} parameters but the campaign "
-                              f"has {len(campaign.sine_tests)} sine dwell(s); plan at least {n_params}")
+                              f"has {len(campaign.sine_tests)} sine dwell(s) and no sweep; plan at least {n_params} "
+                              "dwells, or a sweep")
 
 
 def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str, tuple[float, float]],
@@ -101,7 +114,7 @@ def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str
     for test in campaign.tests:
         track = tracks.get(test.label)
         if track is None or (test.kind == "sine" and test.label not in windows):
-            continue
+            continue  # a sweep and a step are fitted whole, from before their start to the record's end
         t0 = input_start(test, track)
         if t0 is None or track.n_valid < 10:
             continue
@@ -112,7 +125,9 @@ def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str
         traces.append(ServoTrace(test.label, test.kind, test.amplitude, test.frequency_hz, float(t0),
                                  np.asarray(track.angle_time_s[v], float), np.asarray(track.angle_rad[v], float),
                                  float(noise) if noise and noise > 0 else 1e-4, exposure_s,
-                                 windows.get(test.label), 0.5 * float(separation) if separation else math.nan))
+                                 windows.get(test.label), 0.5 * float(separation) if separation else math.nan,
+                                 *((test.from_hz, test.to_hz, test.duration_s, test.shape or "log")
+                                   if test.kind == "sweep" else ())))
     return traces
 
 
@@ -143,11 +158,39 @@ def servo_model(campaign: Campaign, tracks: dict[str, Track], windows: dict[str,
         Parameters computed from the others (:func:`~servoscope.sysid.servo_fit.fit_servo_model`).
     """
     traces = servo_traces(campaign, tracks, windows, exposure_s)
-    if not any(tr.kind == "sine" for tr in traces) and not any(tr.kind == "step" for tr in traces):
+    if not traces:
         raise ServoscopeError(f"{campaign.path}: no test has a known input start and enough valid frames for a "
                               "time-domain fit")
-    return select_servo_model(traces, structures_of(nonlinear), start=start, fix=fix, bounds=bounds, ties=ties,
-                              response=response, t0_stderr_s=t0_stderr_s)
+    selection = select_servo_model(traces, structures_of(nonlinear), start=start, fix=fix, bounds=bounds, ties=ties,
+                                   response=response, t0_stderr_s=t0_stderr_s)
+    notes = identifiability_warnings(traces, structures_of(nonlinear), selection.selected)
+    return replace(selection, warnings=(*selection.warnings, *notes)) if notes else selection
+
+
+def identifiability_warnings(traces: list[ServoTrace], structures: tuple[str, ...], selected: ServoModelFit
+                             ) -> list[str]:
+    """What the traces fitted cannot tell apart (the module's description); none with a step.
+
+    Without a step: with one input amplitude only, the nonlinear structures are told from the
+    linear model only by their waveforms; a rate limit not selected is ruled out only up to
+    the fastest slew any test commanded (the selected model's gain times ``A·2πf``).
+    """
+    tried = [s for s in structures if s in NONLINEAR_PARAMETER]
+    if not tried or any(tr.kind == "step" for tr in traces):
+        return []
+    out = []
+    amplitudes = sorted({round(abs(tr.amplitude), 12) for tr in traces})
+    if len(amplitudes) == 1:
+        out.append(f"every test has one input amplitude ({amplitudes[0]:g}) and there is no step: "
+                   f"{', '.join(tried)} show only in the waveforms' harmonics and in how they change with "
+                   "frequency, not in a gain that changes with amplitude, so they are told apart from the linear "
+                   "model (and from each other) less surely; add dwells at a second amplitude, or a step")
+    if "rate_limit" in tried and selected.structure != "rate_limit":
+        fastest = max(traces, key=lambda tr: abs(tr.amplitude) * tr.top_frequency_hz)
+        slew = abs(selected.params["gain"] * fastest.amplitude) * 2.0 * math.pi * fastest.top_frequency_hz
+        out.append(f"without a step, a rate limit is seen only where a test's slew exceeds it: one above "
+                   f"{slew:.3g} rad/s (the fastest commanded, {fastest.label}) never bites and is not ruled out")
+    return out
 
 
 def predicted_step_fit_percent(campaign: Campaign, tracks: dict[str, Track], label: str,

@@ -373,7 +373,7 @@ def dead_time_warnings(model, step, shared_t0_s: float, exposure: ExposureEstima
     out = []
     if shared_t0_s > 0 and model.dead_time_s is not None:
         out.append(
-            f"the dwells' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
+            f"the tests' LED switches may all have fallen at the same point of the frame clock: their t0 errors "
             f"(±{1e3 * shared_t0_s:.2f} ms) may be one shared error that no averaging removes: the phase dead time's "
             f"interval includes it"
             + ("" if exposure.known else f"; exposure {exposure.detail}"))

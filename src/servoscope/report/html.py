@@ -73,16 +73,23 @@ class ReportSection:
 
     def _encode(self, fig: Figure, name: str | None) -> str:
         if self.figures_dir is not None and name:
-            # The same figures as files, for papers and slides: PNG and SVG.
+            # The same figures as files, for papers and slides: PNG and SVG. The page's image is the
+            # file's PNG scaled down, not drawn a third time (drawing is most of a report's time).
             self.figures_dir.mkdir(parents=True, exist_ok=True)
+            buffer = io.BytesIO()
+            fig.savefig(buffer, format="png", dpi=FILE_DPI)
             with atomic_path(self.figures_dir / f"{name}.png") as tmp:
-                fig.savefig(tmp, dpi=150)
+                tmp.write_bytes(buffer.getvalue())
             # No date and fixed element ids: the same result gives the same bytes.
             import matplotlib
 
             with matplotlib.rc_context({"svg.hashsalt": "servoscope"}):
                 with atomic_path(self.figures_dir / f"{name}.svg") as tmp:
                     fig.savefig(tmp, metadata={"Date": None})
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
+            return _page_png_base64(buffer.getvalue())
         return figure_png_base64(fig)
 
     def warnings(self, items: list[str]) -> "ReportSection":
@@ -101,7 +108,25 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
-def figure_png_base64(fig: Figure, dpi: int = 110) -> str:
+#: Resolution of the figure files (PNG) and of the page's images, dots per inch.
+FILE_DPI = 150
+PAGE_DPI = 110
+
+
+def _page_png_base64(png: bytes) -> str:
+    """A figure file's PNG at the page's resolution (Lanczos), base64-encoded."""
+    from PIL import Image
+
+    with Image.open(io.BytesIO(png)) as image:
+        scale = PAGE_DPI / FILE_DPI
+        small = image.resize((max(1, round(image.width * scale)), max(1, round(image.height * scale))),
+                             Image.Resampling.LANCZOS)
+        out = io.BytesIO()
+        small.save(out, format="png", optimize=False)
+    return base64.b64encode(out.getvalue()).decode("ascii")
+
+
+def figure_png_base64(fig: Figure, dpi: int = PAGE_DPI) -> str:
     """PNG bytes of a figure, base64-encoded for a data: URL; closes the figure."""
     import matplotlib.pyplot as plt
 

@@ -9,7 +9,7 @@ harmonics and transients count, and so does the step.
 Method
 ------
 * Residuals are ``(measured − model − offset)/σ``, each test's rest angle (``offset``)
-  projected out. The dwells and the step are two data sets, each weighted by its own noise:
+  projected out. The dwells, the step and the sweeps are data sets, each weighted by its own noise:
   first the tracker's measured noise, then (after a first fit) the larger of that and the
   set's own residual scatter under the best-fitting candidate, so that neither set swamps
   the other by its number of samples (a maximum-likelihood fit with one variance per set).
@@ -238,7 +238,8 @@ class ServoModelFit(FitResult):
 
 
 def trace_group(trace: ServoTrace) -> str:
-    return "step" if trace.kind == "step" else "dwells"
+    """The data set a trace is weighted in: ``"dwells"``, ``"step"`` or ``"sweep"`` (each its own noise)."""
+    return {"step": "step", "sweep": "sweep"}.get(trace.kind, "dwells")
 
 
 class _Problem:
@@ -355,8 +356,8 @@ def _nonlinear_starts(traces: list[ServoTrace], structure: str, gain: float) -> 
     if structure == "saturation":
         s = max(swing)
         return [0.8 * s, 1.0 * s, 1.3 * s, 50.0 * s], (0.05 * s, 100.0 * s)
-    # A step's slew is unbounded; the sines' largest, or the step's size over 10 ms, sets the scale.
-    slew = max(abs(gain) * tr.amplitude * (2.0 * math.pi * tr.frequency_hz if tr.kind == "sine" else 100.0)
+    # A step's slew is unbounded; the sines' and sweeps' largest, or the step's size over 10 ms, sets the scale.
+    slew = max(abs(gain) * tr.amplitude * (2.0 * math.pi * tr.top_frequency_hz if tr.kind != "step" else 100.0)
                for tr in traces)
     return [0.3 * slew, 0.7 * slew, 1.5 * slew, 1e3 * slew], (1e-3 * slew, 1e4 * slew)
 
@@ -394,7 +395,7 @@ def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
     Parameters
     ----------
     traces : list of ServoTrace
-        The dwells and/or the step.
+        The dwells, the step and the sweeps, any of them.
     structure : str
         One of ``"linear"``, ``"rate_limit"``, ``"backlash"``, ``"quantization"``, ``"saturation"``.
     start : dict or list of dict, optional
@@ -406,7 +407,8 @@ def fit_servo_model(traces: list[ServoTrace], structure: str = "linear", *,
     fix, bounds : dict, optional
         Parameters held at a value, or within ``(lo, hi)``.
     sigma : dict, optional
-        Noise (rad) of each data set, ``"dwells"`` and ``"step"``; default the traces' measured noise.
+        Noise (rad) of each data set, ``"dwells"``, ``"step"`` and ``"sweep"`` (:func:`trace_group`); default
+        the traces' measured noise.
     response : dict, optional
         The dwells' measured (gain, phase_deg, coherence) by label, for CIFER's J.
     t0_stderr_s : float
@@ -466,7 +468,7 @@ def linear_starts(traces: list[ServoTrace], sigma: dict[str, float], keep: int =
     The gain is solved for at each point (the linear model is linear in it), so the grid
     needs no gain axis; the result does not depend on another fit having worked.
     """
-    sines = [tr.frequency_hz for tr in traces if tr.kind == "sine"]
+    sines = [f for tr in traces if tr.kind != "step" for f in (tr.frequency_hz, tr.from_hz, tr.to_hz) if f]
     f_lo, f_hi = (min(sines), max(sines)) if sines else (0.5, 20.0)
     scored = []
     for wn in np.geomspace(2.0 * math.pi * f_lo * 0.5, 2.0 * math.pi * f_hi * 2.0, 8):

@@ -1,13 +1,14 @@
 """Model selection between the time-domain servo structures, and cross-validation (issue 17).
 
 See :mod:`servoscope.sysid.servo_fit` for the fits. :func:`select_servo_model` fits the
-linear model and each nonlinear structure asked for, weights the dwells and the step by
-their own noise, compares them by AIC and BIC in units of the best fit's residual variance
+linear model and each nonlinear structure asked for, weights the dwells, the step and the
+sweeps by their own noise, compares them by AIC and BIC in units of the best fit's residual variance
 (widened by its lag-1 autocorrelation, with the effective number of samples reduced by the
 same factor), and selects a nonlinear structure only when its BIC beats the linear model's by
 more than :data:`BIC_MARGIN` ("very strong" on Kass & Raftery's scale): a tracking artefact
 must not read as a nonlinearity. The selected model's errors are widened to the
-delete-one-test jackknife's where the tests disagree more than they say.
+delete-one-test jackknife's where the tests disagree more than they say, and a play's by the
+tracker's sub-pixel bias (:data:`TRACKER_BIAS_PX`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from .servo_fit import (ServoModelFit, dwell_cost, fit_percent, fit_servo_model,
                         lag1, linear_starts, measured_noise, trace_group)
 from .servo_sim import LINEAR_PARAMETERS, NONLINEAR_PARAMETER, ServoTrace, simulate_trace
 
-__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "ServoModelSelection",
+__all__ = ["BIC_MARGIN", "MIN_EFFECT_PX", "STEP_FIT_PREDICTS", "TRACKER_BIAS_PX", "ServoModelSelection",
            "cross_validate", "effect_px", "select_servo_model"]
 
 #: BIC a nonlinear structure must gain over the linear model to be selected.
@@ -38,6 +39,12 @@ BIC_MARGIN = 10.0
 #: seeds 0 and 1): "backlash" of 0.00026 rad won the BIC by 500 while moving the stickers
 #: 0.013–0.016 px RMS; a true play of 0.004 rad moves them 0.23 px.
 MIN_EFFECT_PX = 0.05
+#: The tracker's sub-pixel bias on the play's width, px at the stickers: each backlash interval is
+#: widened by it over the stickers' radius (issue 31). Measured on the twin's backlash servo (raw
+#: frames, 320×256, stickers 133 px from the axis, seeds 0 and 1): from dwells at two amplitudes,
+#: or a sweep alone, errors of 0.0036–0.0082 px (1 to 6e-5 rad), common to all tests (no jackknife
+#: sees them) and 2 to 4 of the fit's own standard errors.
+TRACKER_BIAS_PX = 0.01
 
 
 @dataclass(frozen=True)
@@ -55,7 +62,8 @@ class ServoModelSelection:
     cross_validation : dict
         ``dwells_to_step`` (the model fitted to the dwells alone, its fit on the step in
         percent), ``step_to_dwells`` (fitted to the step alone, its J on the dwells) and a
-        ``verdict``; absent parts are None.
+        ``verdict``; absent parts are None. Without a step, a sweep's under ``dwells_to_sweep``
+        and ``sweep_to_dwells`` (:func:`cross_validate`).
     warnings : list of str
         Why a better-fitting structure was not selected (its effect under
         :data:`MIN_EFFECT_PX`).
@@ -194,7 +202,8 @@ def _select(traces, structures, start, fix, bounds, response, t0_stderr_s, ties)
             selected = linear
     if len(structures) == 1 and structures[0] != "linear":
         selected = fits[1]  # asked for by name: that structure, the others for comparison
-    widened = _jackknife(traces, selected, sigma, held(selected.structure, fix), held(selected.structure, bounds))
+    widened = _tracker_bias(_jackknife(traces, selected, sigma, held(selected.structure, fix),
+                                       held(selected.structure, bounds)))
     fits = [widened if f is selected else f for f in fits]
     selected = widened
     cv = cross_validate(traces, selected, sigma=sigma, response=response, fix=held(selected.structure, fix),
@@ -256,59 +265,82 @@ def _jackknife(traces: list[ServoTrace], fit: ServoModelFit, sigma: dict[str, fl
     return replace(fit, stderr=stderr, ci95=ci95)
 
 
+def _tracker_bias(fit: ServoModelFit) -> ServoModelFit:
+    """``fit`` with its play's error widened by :data:`TRACKER_BIAS_PX` over the stickers' radius (where known)."""
+    name = "backlash_rad"
+    radius = [tr.sticker_radius_px for tr in fit.traces if math.isfinite(tr.sticker_radius_px)]
+    if fit.structure != "backlash" or name in fit.fixed or name in fit.tied or not radius:
+        return fit
+    se = math.hypot(fit.stderr[name], TRACKER_BIAS_PX / float(np.median(radius)))
+    return replace(fit, stderr={**fit.stderr, name: se},
+                   ci95={**fit.ci95, name: interval95(fit.params[name], se, interval_kind(fit.structure, name))})
+
+
 def cross_validate(traces: list[ServoTrace], model: ServoModelFit, *, sigma: dict[str, float],
                    response: dict | None = None, fix: dict | None = None, bounds: dict | None = None
                    ) -> dict[str, Any]:
     """Fit the model's structure to the dwells alone and predict the step, and the reverse.
+
+    Without a step, a sweep takes its place (``dwells_to_sweep``, ``sweep_to_dwells``): a
+    different input, so a test of the model all the same.
 
     Returns
     -------
     dict
         ``dwells_to_step``: ``{"fit_percent"}`` of the step predicted by the dwells' fit (its
         rest angle the step's own, from the samples before the input arrived);
-        ``step_to_dwells``: ``{"J"}`` of the dwells predicted by the step's fit; ``verdict``.
+        ``step_to_dwells``: ``{"J"}`` of the dwells predicted by the step's fit; ``verdict``
+        (it says why when nothing could be done). With a sweep and no step, the same under
+        ``dwells_to_sweep`` and ``sweep_to_dwells``.
     """
     dwells = [tr for tr in traces if tr.kind == "sine"]
-    steps = [tr for tr in traces if tr.kind == "step"]
+    other = [tr for tr in traces if tr.kind == "step"] or [tr for tr in traces if tr.kind == "sweep"]
     out: dict[str, Any] = {"dwells_to_step": None, "step_to_dwells": None, "verdict": None}
-    if not (dwells and steps):
-        out["verdict"] = "not done: cross-validation needs both dwells and a step"
+    if not (dwells and other):
+        kinds = sorted({tr.kind for tr in traces})
+        out["verdict"] = ("not done: cross-validation needs the dwells and a step or a sweep; the campaign has "
+                          f"{' and '.join({'sine': 'dwells', 'step': 'a step', 'sweep': 'a sweep'}[k] for k in kinds)}"
+                          " only" if kinds else "not done: no tests")
         return out
+    name = other[0].kind
+    forward, backward = f"dwells_to_{name}", f"{name}_to_dwells"
+    out.update({forward: None, backward: None})
     start = dict(model.params)
     problems = []
     try:
         from_dwells = fit_servo_model(dwells, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma,
                                       ties=model.tied)
-        step = steps[0]
-        predicted = simulate_trace(step, model.structure, from_dwells.params)
-        rest = float(np.mean((step.angle_rad - predicted)[step.time_s < step.t0_s + from_dwells.params["dead_time_s"]])
-                     ) if np.any(step.time_s < step.t0_s) else float(np.mean(step.angle_rad - predicted))
-        out["dwells_to_step"] = {"fit_percent": fit_percent(step.angle_rad, predicted + rest)}
+        test = other[0]
+        predicted = simulate_trace(test, model.structure, from_dwells.params)
+        before = test.time_s < test.t0_s + from_dwells.params["dead_time_s"]
+        rest = float(np.mean((test.angle_rad - predicted)[before])) if np.any(test.time_s < test.t0_s) else float(
+            np.mean(test.angle_rad - predicted))
+        out[forward] = {"fit_percent": fit_percent(test.angle_rad, predicted + rest)}
     except ServoscopeError as exc:
-        problems.append(f"dwells → step not done ({exc})")
+        problems.append(f"dwells → {name} not done ({exc})")
     try:
-        from_step = fit_servo_model(steps, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma,
-                                    ties=model.tied)
+        from_other = fit_servo_model(other, model.structure, start=start, fix=fix, bounds=bounds, sigma=sigma,
+                                     ties=model.tied)
         if response:
-            out["step_to_dwells"] = {"J": dwell_cost(from_step.params, model.structure, dwells, response)}
+            out[backward] = {"J": dwell_cost(from_other.params, model.structure, dwells, response)}
     except ServoscopeError as exc:
-        problems.append(f"step → dwells not done ({exc})")
-    out["verdict"] = _verdict(out, problems)
+        problems.append(f"{name} → dwells not done ({exc})")
+    out["verdict"] = _verdict(out, problems, name)
     return out
 
 
-#: The step's fit (percent) a model must reach to be said to predict it.
+#: The step's (or, without one, the sweep's) fit (percent) a model must reach to be said to predict it.
 STEP_FIT_PREDICTS = 90.0
 
 
-def _verdict(cv: dict[str, Any], problems: list[str]) -> str:
+def _verdict(cv: dict[str, Any], problems: list[str], name: str = "step") -> str:
     parts = []
-    d2s, s2d = cv["dwells_to_step"], cv["step_to_dwells"]
+    d2s, s2d = cv[f"dwells_to_{name}"], cv[f"{name}_to_dwells"]
     if d2s is not None:
         ok = d2s["fit_percent"] >= STEP_FIT_PREDICTS
-        parts.append(f"the dwells' model {'predicts' if ok else 'does not predict'} the step "
+        parts.append(f"the dwells' model {'predicts' if ok else 'does not predict'} the {name} "
                      f"(fit {d2s['fit_percent']:.1f} %)")
     if s2d is not None and math.isfinite(s2d["J"]):
         ok = s2d["J"] <= 100.0
-        parts.append(f"the step's model {'predicts' if ok else 'does not predict'} the dwells (J {s2d['J']:.3g})")
+        parts.append(f"the {name}'s model {'predicts' if ok else 'does not predict'} the dwells (J {s2d['J']:.3g})")
     return "; ".join(parts + problems) or "not done"

@@ -41,6 +41,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..errors import ServoscopeError
+from .inputs import sweep_command, sweep_problems
 
 __all__ = ["GRID_STEP_S", "LINEAR_PARAMETERS", "NONLINEAR_PARAMETER", "STRUCTURES", "ServoTrace", "simulate_trace"]
 
@@ -66,10 +67,11 @@ class ServoTrace:
     Attributes
     ----------
     label : str
-    kind : {"sine", "step"}
+    kind : {"sine", "step", "sweep"}
     amplitude : float
-        Sine amplitude or step size, input units.
+        Sine or sweep amplitude, or step size, input units.
     frequency_hz : float or None
+        A sine's frequency; None for a step or a sweep.
     t0_s : float
         When the input started, seconds (the LED's switch or the manifest's t0).
     time_s : ndarray
@@ -85,6 +87,8 @@ class ServoTrace:
     sticker_radius_px : float
         How far each sticker moves per radian of pitch (half their separation), px; NaN when
         not known. It turns a model's effect into what the picture shows.
+    from_hz, to_hz, duration_s, shape
+        A sweep's chirp (:func:`~servoscope.sysid.inputs.sweep_command`); None for the other kinds.
     """
 
     label: str
@@ -98,10 +102,18 @@ class ServoTrace:
     exposure_s: float = 0.0
     window_s: tuple[float, float] | None = None
     sticker_radius_px: float = math.nan
+    from_hz: float | None = None
+    to_hz: float | None = None
+    duration_s: float | None = None
+    shape: str | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in ("sine", "step"):
-            raise ServoscopeError(f"{self.label}: a trace is a sine or a step, not {self.kind!r}")
+        if self.kind not in ("sine", "step", "sweep"):
+            raise ServoscopeError(f"{self.label}: a trace is a sine, a step or a sweep, not {self.kind!r}")
+        if self.kind == "sweep":
+            problems = sweep_problems(self.from_hz, self.to_hz, self.duration_s, self.shape or "log")
+            if problems:
+                raise ServoscopeError(f"{self.label}: " + "; ".join(f"{k}: {m}" for k, m in problems))
         if self.time_s.shape != self.angle_rad.shape or self.time_s.ndim != 1:
             raise ServoscopeError(f"{self.label}: time and angle differ in shape")
         if not (self.noise_rad > 0 and math.isfinite(self.noise_rad)):
@@ -122,9 +134,17 @@ class ServoTrace:
             return cached[:n]
         return self.command(self.t0_s + (np.arange(n) + 0.5) * GRID_STEP_S)
 
+    @property
+    def top_frequency_hz(self) -> float | None:
+        """The highest frequency the input holds: a sine's, a sweep's ``to_hz``; None for a step."""
+        return self.to_hz if self.kind == "sweep" else self.frequency_hz
+
     def command(self, time_s: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The input at ``time_s`` (0 before the start), input units."""
+        """The input at ``time_s`` (0 before the start; a sweep's 0 after it too), input units."""
         dt = time_s - self.t0_s
+        if self.kind == "sweep":
+            return sweep_command(dt, self.amplitude, float(self.from_hz), float(self.to_hz), float(self.duration_s),
+                                 self.shape or "log")
         if self.kind == "sine":
             u = self.amplitude * np.sin(2.0 * math.pi * float(self.frequency_hz) * dt)
         else:
