@@ -45,7 +45,7 @@ def print_model(result, truth: dict | None = None) -> None:
         table.add_row(*cells)
     rows = [("−3 dB bandwidth (rad/s)", result.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"))]
     true_dead = truth_model.get("dead_time_s")
-    short = {"step": "step test", "phase": "dwells' phases"}
+    short = {"step": "step test", "phase": "frequency response's phases"}
     chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
     for key, e in result.dead_time_estimates.items():
         if e is not None and key != chosen:
@@ -88,7 +88,7 @@ def print_servo_model(result, truth: dict | None) -> None:
     from rich.table import Table
 
     sel = result.servo_model.selected
-    table = Table(title=f"time-domain models (dwells and step together): {sel.structure} selected")
+    table = Table(title=f"time-domain models (fitted to the whole traces): {sel.structure} selected")
     for col in ("structure", "BIC", "CIFER J (dwells)", "step fit"):
         table.add_column(col, justify="right")
     for c in result.servo_model.candidates:

@@ -49,7 +49,8 @@ def test_a_sweep_and_two_dwells_give_one_response_and_the_servo(sweep_campaign):
 
 def test_the_command_writes_the_sweep_and_reads_it_back(sweep_campaign, tmp_path):
     out = tmp_path / "out"
-    run = run_cli("identify", str(sweep_campaign), "--out", str(out), "--workers", "1")
+    # With the time-domain fit too: its report section draws the dwells' describing function, not the sweep's points.
+    run = run_cli("identify", str(sweep_campaign), "--out", str(out), "--workers", "1", "--nonlinear", "linear")
     assert run.returncode == 0, run.stderr
     data = json.loads((out / "result.json").read_text())
     (label, sweep), = data["sweeps"].items()
@@ -57,7 +58,8 @@ def test_the_command_writes_the_sweep_and_reads_it_back(sweep_campaign, tmp_path
     entry = next(t for t in data["tests"] if t["kind"] == "sweep")
     assert (entry["from_hz"], entry["to_hz"], entry["duration_s"], entry["shape"]) == (0.5, 12.0, 6.0, "log")
     report = (out / "report.html").read_text()
-    assert "Frequency sweeps" in report and "coherence" in report
+    assert "Frequency sweeps" in report and "coherence" in report and "One model for the sines and the step" in report
+    assert data["model"]["time_domain"]["candidates"][0]["structure"] == "linear"
     assert (out / "figures" / f"{label}_response.png").exists() and (out / "figures" / f"{label}_time.png").exists()
     again = IdentificationResult.load(out)
     assert json.dumps(again.summary(), sort_keys=True) == json.dumps(data, sort_keys=True)

@@ -110,7 +110,7 @@ def headline(result: Any) -> Headline:
     if selection is not None and selection.selected.structure != "linear":
         fit = selection.selected
         return Headline("time domain", fit.structure, fit.parameters,
-                        f"{fit.structure} model (dwells and step together)", _servo_equation(fit))
+                        f"{fit.structure} model (fitted to the whole traces)", _servo_equation(fit))
     model = result.model
     rows = [p for p in model.parameters.values() if p.name != "dead_time_s"]
     source, chosen = chosen_dead_time(result.dead_time_estimates)

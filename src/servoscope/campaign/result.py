@@ -211,7 +211,7 @@ class IdentificationResult:
     @property
     def dead_time_source(self) -> str | None:
         """Where :attr:`dead_time_s` comes from: "step test", "frequency response (phase)" or the selected
-        nonlinear model ("backlash model (dwells and step together)")."""
+        nonlinear model ("backlash model (fitted to the whole traces)")."""
         return self.headline.dead_time_source
 
     @property

@@ -66,7 +66,7 @@ def dead_time_rows(result: "IdentificationResult") -> list[list[str]]:
     rows = []
     estimates = result.dead_time_estimates
     chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
-    for key, label in (("phase", "dwells' phases"), ("step", "step test")):
+    for key, label in (("phase", "frequency response's phases"), ("step", "step test")):
         e = estimates.get(key)
         if e is None:
             continue
@@ -451,11 +451,13 @@ def _servo_model_section(result: "IdentificationResult", figures_dir) -> ReportS
         fr = result.frequency_response
         measured: dict[float, list] = {}
         for label, f, g, se, ph in zip(fr.labels, fr.frequency_hz, fr.gain, fr.gain_stderr, fr.phase_deg):
-            measured.setdefault(round(float(f), 6), []).append((amplitude[label], g, se, ph))
-        s.figure(describing_function_figure(shown, measured), "Each dwell's measured gain and phase (points, ±1 "
-                 "standard error) against its input amplitude, and the models' describing functions (their "
-                 "fundamentals, simulated): a linear model's is flat; a nonlinearity's bends.",
-                 "Describing function", name="describing_function")
+            if label in amplitude:  # the dwells' points; a sweep's (label@f) have no one amplitude of their own
+                measured.setdefault(round(float(f), 6), []).append((amplitude[label], g, se, ph))
+        if measured:
+            s.figure(describing_function_figure(shown, measured), "Each dwell's measured gain and phase (points, ±1 "
+                     "standard error) against its input amplitude, and the models' describing functions (their "
+                     "fundamentals, simulated): a linear model's is flat; a nonlinearity's bends.",
+                     "Describing function", name="describing_function")
         dwells = [tr for tr in sel.traces if tr.kind == "sine"]
         if dwells:
             # The dwell where the candidates disagree most shows what tells them apart.

@@ -57,7 +57,7 @@ class DeadTimeEstimate(FitResult):
 
     @property
     def model_name(self) -> str:  # type: ignore[override]
-        return ("dead time from the dwells' phases" if self.source == "phase"
+        return ("dead time from the frequency response's phases" if self.source == "phase"
                 else "dead time from the step, fitted against the model")
 
     @property
