@@ -22,6 +22,7 @@ def print_model(result, truth: dict | None = None) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from .campaign.headline import SOURCE_KEYS
     from .numbers import format_interval, format_with_uncertainty
 
     head = result.headline
@@ -46,7 +47,7 @@ def print_model(result, truth: dict | None = None) -> None:
     rows = [("−3 dB bandwidth (rad/s)", result.bandwidth_rad_s, None, None, (truth or {}).get("bandwidth_rad_s"))]
     true_dead = truth_model.get("dead_time_s")
     short = {"step": "step test", "phase": "frequency response's phases"}
-    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
+    chosen = SOURCE_KEYS.get(result.dead_time_source or "")
     for key, e in result.dead_time_estimates.items():
         if e is not None and key != chosen:
             rows.append((f"  other dead-time estimate (ms): {short[key]}", 1e3 * e.value_s, 1e3 * e.stderr_s,

@@ -36,7 +36,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from statistics import NormalDist
@@ -304,13 +304,6 @@ class Parameters(Mapping[str, Parameter]):
     def valuesdict(self) -> dict[str, float]:
         """``{name: value}`` (lmfit's name)."""
         return {k: p.value for k, p in self._items.items()}
-
-    def replaced(self, name: str, **changes: Any) -> "Parameters":
-        """A copy with one parameter's attributes changed (``dataclasses.replace``)."""
-        items = [replace(p, **changes) if p.name == name else p for p in self._items.values()]
-        if name not in self._items:
-            raise KeyError(name)
-        return Parameters(items, correlation=self.correlation, correlated=self.correlated)
 
     def summary(self) -> dict[str, Any]:
         """``{name: Parameter.summary()}``; plain JSON types."""

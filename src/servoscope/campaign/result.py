@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
@@ -182,10 +183,13 @@ class IdentificationResult:
         """The identified model as a python-control TransferFunction (without the delay)."""
         return self.model.transfer_function
 
-    @property
+    @cached_property
     def headline(self) -> Headline:
         """The model this result states first (:func:`servoscope.campaign.headline.headline`): the selected
-        time-domain model when it is nonlinear, else the transfer function with its better dead time."""
+        time-domain model when it is nonlinear, else the transfer function with its better dead time.
+
+        Made once: the result is frozen, and every view (tables, report, result.json) reads it.
+        """
         return headline(self)
 
     @property

@@ -13,6 +13,7 @@ from .figures import (amplitude_figure, blade_frame_figure, bode_figure, candida
 from .html import ReportSection, render_html
 from .plane_section import plane_section
 from .sweep_section import sweep_section
+from ..campaign.headline import SOURCE_KEYS
 from ..numbers import format_interval, format_value, format_with_uncertainty
 from ..camera.plane_map import recorded_points
 from ..sysid.model_text import PARAM_LABELS, model_equation
@@ -65,7 +66,7 @@ def dead_time_rows(result: "IdentificationResult") -> list[list[str]]:
     """One row per dead-time estimate (dwells' phases, step): value ± stderr and 95 % interval, in ms."""
     rows = []
     estimates = result.dead_time_estimates
-    chosen = {"step test": "step", "frequency response (phase)": "phase"}.get(result.dead_time_source or "")
+    chosen = SOURCE_KEYS.get(result.dead_time_source or "")
     for key, label in (("phase", "frequency response's phases"), ("step", "step test")):
         e = estimates.get(key)
         if e is None:

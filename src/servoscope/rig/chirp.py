@@ -17,7 +17,8 @@ import numpy as np
 from ..defaults import MIN_DWELL_S, SETTLE_S
 from ..errors import ServoscopeError
 from ..sysid.inputs import SWEEP_SHAPES
-from .plan import PWM_HARMONICS, Dwell, SweepPlan, fold_hz, frequency_warnings, positive_option
+from .plan import (PWM_HARMONICS, Dwell, SweepPlan, fold_hz, frequency_warnings, pause_options, positive_option,
+                   step_dwells)
 
 __all__ = [
     "plan_chirp",
@@ -288,11 +289,7 @@ def plan_chirp(
     amplitude = positive_option(amplitude, "--amplitude")
     noise_deg = positive_option(noise_deg, "--noise-deg", allow_zero=True)
     update_hz = positive_option(update_hz, "--update-hz")
-    settle_s = positive_option(settle_s, "--settle", allow_zero=True)
-    min_seconds = positive_option(min_seconds, "--min-seconds", allow_zero=True)
-    lead_in_s = positive_option(lead_in_s, "--lead-in", allow_zero=True)
-    tail_s = positive_option(tail_s, "--tail", allow_zero=True)
-    rest_s = positive_option(rest_s, "--rest", allow_zero=True)
+    settle_s, min_seconds, lead_in_s, tail_s, rest_s = pause_options(settle_s, min_seconds, lead_in_s, tail_s, rest_s)
     if shape not in SWEEP_SHAPES:
         raise ServoscopeError(f"--sweep-shape {shape!r}: use log or linear")
     if not to_hz > from_hz:
@@ -300,10 +297,7 @@ def plan_chirp(
     if to_hz >= fps / 2:  # as the manifest refuses it (campaign.inputs)
         raise ServoscopeError(f"--sweep {from_hz:g}:{to_hz:g}: the top frequency is at or above half the frame rate "
                               f"({fps / 2:g} Hz at {fps:g} fps); the camera cannot show it")
-    if step and (not math.isfinite(step_amplitude) or step_amplitude == 0):
-        raise ServoscopeError("--step-amplitude must be ≠ 0 (or use --no-step)")
-    if step:
-        step_seconds = positive_option(step_seconds, "--step-seconds")
+    steps = step_dwells(step, step_amplitude, step_seconds, min_seconds)
     sweep_s = sweep_duration_s(from_hz, to_hz, duration_s, shape)
     if record_s is not None:
         record_s = positive_option(record_s, "--record-seconds")
@@ -321,9 +315,8 @@ def plan_chirp(
             f"sweep top {to_hz:g} Hz: expected coherence γ² ≈ {estimate.coherence:.2f}, below {MIN_COHERENCE:g} "
             f"(response ±{estimate.response_deg:.2g}° against {noise_deg:.2g}° of angle noise); use a longer "
             f"--duration (SNR grows as its square root) or a larger --amplitude (as its square)")
-    dwells = [Dwell("sweep", amplitude, None, sweep_s, tuple(warnings), from_hz=from_hz, to_hz=to_hz, shape=shape)]
-    if step:
-        dwells.append(Dwell("step", float(step_amplitude), None, max(step_seconds, min_seconds)))
+    dwells = [Dwell("sweep", amplitude, None, sweep_s, tuple(warnings), from_hz=from_hz, to_hz=to_hz, shape=shape),
+              *steps]
     return SweepPlan(
         fps=fps, update_hz=update_hz, settle_s=settle_s, periods=8.0, min_seconds=min_seconds,
         lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s, dwells=tuple(dwells),

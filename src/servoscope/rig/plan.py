@@ -39,7 +39,9 @@ __all__ = [
     "dwell_duration_s",
     "frequency_warnings",
     "fold_hz",
+    "pause_options",
     "positive_option",
+    "step_dwells",
     "read_plan",
     "write_plan",
     "plan_to_toml",
@@ -282,6 +284,37 @@ def positive_option(value: float, option: str, *, allow_zero: bool = False) -> f
     return value
 
 
+def pause_options(settle_s: float, min_seconds: float, lead_in_s: float, tail_s: float,
+                  rest_s: float) -> tuple[float, float, float, float, float]:
+    """A plan's times (settle, shortest input, lead-in, tail, rest between tests), each checked ≥ 0, in that order.
+
+    Raises
+    ------
+    ServoscopeError
+        The first one out of range, named by its option.
+    """
+    min_seconds = positive_option(min_seconds, "--min-seconds", allow_zero=True)
+    settle_s = positive_option(settle_s, "--settle", allow_zero=True)
+    return (settle_s, min_seconds, positive_option(lead_in_s, "--lead-in", allow_zero=True),
+            positive_option(tail_s, "--tail", allow_zero=True), positive_option(rest_s, "--rest", allow_zero=True))
+
+
+def step_dwells(step: bool, step_amplitude: float, step_seconds: float, min_seconds: float) -> list[Dwell]:
+    """The plan's final step test (none without ``step``), its options checked.
+
+    Raises
+    ------
+    ServoscopeError
+        A step of size 0 (or not finite), or a step duration ≤ 0.
+    """
+    if not step:
+        return []
+    if not math.isfinite(step_amplitude) or step_amplitude == 0:
+        raise ServoscopeError("--step-amplitude must be ≠ 0 (or use --no-step)")
+    step_seconds = positive_option(step_seconds, "--step-seconds")
+    return [Dwell("step", float(step_amplitude), None, max(step_seconds, min_seconds))]
+
+
 def plan_sweep(
     fps: float,
     from_hz: float,
@@ -362,11 +395,7 @@ def plan_sweep(
         if not levels or len(set(levels)) != len(levels):
             raise ServoscopeError(f"--amplitudes {','.join(f'{a:g}' for a in amplitudes)}: give distinct amplitudes")
     periods = positive_option(periods, "--periods")
-    min_seconds = positive_option(min_seconds, "--min-seconds", allow_zero=True)
-    settle_s = positive_option(settle_s, "--settle", allow_zero=True)
-    lead_in_s = positive_option(lead_in_s, "--lead-in", allow_zero=True)
-    tail_s = positive_option(tail_s, "--tail", allow_zero=True)
-    rest_s = positive_option(rest_s, "--rest", allow_zero=True)
+    settle_s, min_seconds, lead_in_s, tail_s, rest_s = pause_options(settle_s, min_seconds, lead_in_s, tail_s, rest_s)
     if to_hz < from_hz:
         raise ServoscopeError(f"--to {to_hz:g} is below --from {from_hz:g}")
     if int(points) != points or points < 1:
@@ -374,10 +403,7 @@ def plan_sweep(
     points = int(points)
     if points == 1 and to_hz != from_hz:
         raise ServoscopeError("--points 1 needs --from equal to --to (or use --points ≥ 2)")
-    if step and (not math.isfinite(step_amplitude) or step_amplitude == 0):
-        raise ServoscopeError("--step-amplitude must be ≠ 0 (or use --no-step)")
-    if step:
-        step_seconds = positive_option(step_seconds, "--step-seconds")
+    steps = step_dwells(step, step_amplitude, step_seconds, min_seconds)
 
     raw_hz = np.geomspace(from_hz, to_hz, points) if points > 1 else np.array([from_hz])
     # 3 significant digits: readable file names and tables, spacing still log to ±0.5 %.
@@ -391,8 +417,7 @@ def plan_sweep(
         for level in levels:
             dwells.append(Dwell("sine", level, f, duration,
                                 tuple(frequency_warnings(f, fps, update_hz, duration - settle_s))))
-    if step:
-        dwells.append(Dwell("step", float(step_amplitude), None, max(step_seconds, min_seconds)))
+    dwells += steps
     return SweepPlan(
         fps=fps, update_hz=update_hz, settle_s=settle_s, periods=periods, min_seconds=min_seconds,
         lead_in_s=lead_in_s, tail_s=tail_s, rest_s=rest_s, dwells=tuple(dwells),
