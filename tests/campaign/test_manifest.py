@@ -48,6 +48,10 @@ def test_good_manifest(folder):
         (GOOD.replace('lead = "#d62728"', 'lead = "#zz0000"'), "is not a colour"),
         (GOOD.replace('lead = "#d62728"\n', ""), "markers.lead: missing"),
         (GOOD.replace('video = "b.mp4"', 'video = "a.mp4"'), "tests[2].video: 'a.mp4' is also the video of tests[1]"),
+        # A name no file can have (found by tests/test_properties.py): one line, not a ValueError from the OS.
+        (GOOD.replace('video = "b.mp4"', 'video = "b\\u0000.mp4"'), "tests[2].video: 'b\\x00.mp4' holds a NUL character"),
+        (GOOD.replace('video = "b.mp4"', 'frames = "f\\u0000/*.tif"\nfps = 100'),
+         "tests[2].frames: 'f\\x00/*.tif' holds a NUL character"),
         (GOOD.replace("frequency_hz = 1.0", "frequency_hz = 20.0"), "tests[1].frequency_hz: 20 Hz is at or above half the video's frame rate"),
         (GOOD.replace("amplitude = 0.1", "amplitud = 0.1"), "tests[1].amplitud: unknown key (did you mean 'amplitude'?)"),
         ("[markers]\nlead='red'\ntrail='blue'\n", "no [[tests]]"),

@@ -346,6 +346,11 @@ def _test_source(problems: Problems, where: str, i: int, entry: dict, base: Path
     """A test's recording: (ok, the video or frame source's path string, its default label)."""
     video = entry.get("video")
     default_label = f"test{i}"
+    for key in ("video", "frames"):
+        # No file can have such a name; the operating system refuses it (ValueError) rather than not finding it.
+        if isinstance(entry.get(key), str) and "\x00" in entry[key]:
+            problems.add(f"{where}.{key}", f"{entry[key]!r} holds a NUL character: give the recording's file name")
+            return False, None, default_label
     if "frames" in entry:  # an image sequence or a high-speed raw file (issue 16)
         try:
             video = manifest_frame_source(entry, base)
