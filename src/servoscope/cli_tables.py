@@ -143,7 +143,9 @@ def print_blade_motions(result, truth: dict | None) -> None:
         hm = result.heave_model
         kappas = ", ".join(f"{' ± '.join(format_with_uncertainty(k, kse))} px/rad at {m.frequency_hz:.4g} Hz"
                            for k, kse, m in zip(hm.gains_px_per_rad, hm.gain_stderrs_px_per_rad, hm.modes))
-        console.print(f"flapping response fitted over {hm.n_dwells} dwells: heave/pitch = Σ κ·ω²/(ωm² − ω² + "
+        over = (f"the whole traces ({hm.n_dwells} dwells and the other tests)" if hm.method == "whole traces"
+                else f"{hm.n_dwells} dwells")
+        console.print(f"flapping response fitted over {over}: heave/pitch = Σ κ·ω²/(ωm² − ω² + "
                       f"2jζωm·ω), κ = {kappas}")
 
 

@@ -16,16 +16,24 @@ from ..angle.pivot import heave_px, pivot_motion
 from ..markers.track import marker_names
 from ..markers.track import Track
 from ..sysid import SineFit
-from ..sysid.heave import HeaveModel, HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px
+from ..sysid.heave import (HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_REL, HEAVE_SYSTEMATIC_REL_PREDICTED, HeaveModel,
+                           HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px)
+from ..sysid.heave_traces import HeaveTrace, fit_heave_traces, mode_response_px
 from ..sysid.modes import ModeFit, fit_damped_modes, fit_mode_shapes, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["HEAVE_MIN_Z", "MIN_RINGDOWN_PERIODS", "axis_of", "bending_response", "blade_modes", "dwell_modes",
-           "heave_model", "heave_response", "step_ringdown_warning"]
+__all__ = ["HEAVE_MIN_Z", "MIN_IFRAMES", "MIN_RINGDOWN_PERIODS", "MIN_SETTLED_PERIODS", "axis_of", "bending_response", "blade_modes", "dwell_modes",
+           "flapping", "heave_model", "heave_response", "heave_traces", "step_ringdown_warning"]
 
 #: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
 HEAVE_MIN_Z = 5.0
+#: Near the blade's mode, a dwell's heave is measured from the mode's settling (4/(ζω) after the input's start)
+#: on when the dwell records at least this many of its periods after it; else it is the model's.
+MIN_SETTLED_PERIODS = 4.0
+#: A dwell's heave is fitted to its I-frames alone when its window holds at least this many (and the codec
+#: predicts the others): the pitch's codec check asks as many (:mod:`servoscope.sysid.sine`).
+MIN_IFRAMES = 8
 
 
 def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str] = ("", "")) -> list[ModeFit]:
@@ -175,8 +183,196 @@ def _mode_of(modes: list[ModeFit] | None) -> list[tuple[float, float]] | None:
     return [(m.frequency_hz, m.damping_ratio) for m in modes if m.source == modes[0].source]
 
 
+def heave_traces(campaign: Campaign, tracks: dict[str, Track], pivot) -> list[HeaveTrace]:
+    """Every test's heave and pitch per frame with its input start (dwells, steps and sweeps), for
+    :func:`~servoscope.sysid.heave_traces.fit_heave_traces`; empty without an axis."""
+    out = []
+    if pivot is None:
+        return out
+    for test in campaign.tests:
+        track = tracks.get(test.label)
+        t0 = None if track is None else input_start(test, track)
+        if t0 is None:
+            continue
+        h = heave_px(track.lead_xy_px, track.trail_xy_px, track.valid, pivot.centre_xy_px)
+        pitch = np.where(track.valid, track.angle_rad, np.nan)
+        out.append(HeaveTrace(test.label, np.asarray(track.angle_time_s, float), pitch, h, float(t0)))
+    return out
+
+
+def _settles_s(mode: ModeFit) -> float:
+    """How long a mode takes to settle after its drive starts: four time constants, 4/(ζω)."""
+    return 4.0 / (mode.damping_ratio * 2.0 * math.pi * mode.frequency_hz)
+
+
+def _pitch_of(fit: SineFit, amplitude: float) -> tuple[float, float, float, float] | None:
+    """A dwell's pitch per input unit: (gain, its error, phase rad, its error); None without a phase."""
+    if fit.phase_rad is None or not amplitude:
+        return None
+    a = abs(amplitude)
+    return fit.amplitude / a, fit.amplitude_stderr / a, fit.phase_rad, fit.phase_stderr_rad or 0.0
+
+
+def _model_row(test, fit: SineFit, model: HeaveModel, systematic_px: float) -> HeaveRow | None:
+    """A dwell's steady-state heave from the flapping model (its ratio times the dwell's measured pitch), marked ``"model"``."""
+    pitch = _pitch_of(fit, test.amplitude)
+    if pitch is None:
+        return None
+    gain_p, se_p, phase_p, se_phase_p = pitch
+    ratio = complex(model.ratio(np.array([test.frequency_hz]))[0])
+    r = abs(ratio)
+    if not r > 0:
+        return None
+    se_r = model.ratio_stderr(test.frequency_hz)
+    gain = r * gain_p
+    floor = systematic_px / abs(test.amplitude)
+    se_gain = math.sqrt((se_r * gain_p) ** 2 + (r * se_p) ** 2 + floor**2)
+    se_phase = math.hypot(se_r / r, se_phase_p)
+    phase = math.degrees(math.remainder(math.atan2(ratio.imag, ratio.real) + phase_p, 2.0 * math.pi))
+    return HeaveRow(test.label, float(test.frequency_hz), gain, se_gain, phase, math.degrees(se_phase),
+                    gain * abs(test.amplitude), source="model")
+
+
+def _unsettled(test, track: Track, t0: float, fit: SineFit, row: HeaveRow, model: HeaveModel, pitch_rad: np.ndarray,
+               mode_columns, window_s: tuple[float, float]) -> ModeFit | None:
+    """The mode whose transient the dwell's window still holds, or None: the window starts before the mode
+    settles (4/(ζω) after the input's start) and the model's own heave over this dwell, fitted as the
+    measurement is, misses its steady state by more than the row's standard error."""
+    start = window_s[0] - t0
+    waiting = [m for m in model.modes if start < _settles_s(m)]
+    pitch = _pitch_of(fit, test.amplitude)
+    if not waiting or pitch is None:
+        return None
+    # The model's heave over this dwell, noise-free, driven by the pitch measured each frame.
+    sim = sum(kappa * mode_response_px(track.angle_time_s, pitch_rad, m.frequency_hz, m.damping_ratio)
+              for kappa, m in zip(model.gains_px_per_rad, model.modes))
+    seen = dwell_heave(track.angle_time_s, sim, test.frequency_hz, t0, test.amplitude, window_s, test.label,
+                       systematic_px=0.0, mode=mode_columns)
+    steady = abs(complex(model.ratio(np.array([test.frequency_hz]))[0])) * pitch[0]
+    if seen is None or abs(seen.gain - steady) <= row.gain_stderr:
+        return None
+    return max(waiting, key=_settles_s)
+
+
+def flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
+             modes: list[ModeFit], warnings: list[str], *,
+             exposure_s: float = 0.0) -> tuple[list[HeaveRow], HeaveModel | None]:
+    """The blade's heave per dwell and its flapping model, the model fitted to the heave's whole traces (issue 32).
+
+    1. The model (:func:`~servoscope.sysid.heave_traces.fit_heave_traces`) is fitted to every
+       test's heave, started at the modes found (the step's ring-down, else the dwells' heave ratios,
+       :func:`heave_model`); with no mode, only its axis term (the heave in phase with the pitch
+       that an axis found off along the chord leaves).
+    2. Each dwell's heave (:func:`heave_response`) is measured on the heave less the axis term,
+       its error widened by the term's.
+    3. A dwell whose window starts before a mode has settled (4/(ζω)) and whose window, on the
+       model's own heave, misses the steady state by more than its standard error is measured from
+       the mode's settling on where the dwell records :data:`MIN_SETTLED_PERIODS` after it; where it
+       does not, it gets a warning naming it and the record it needs, and its row is the model's
+       steady state (``source = "model"``), not a sine fitted to a transient.
+
+    4. Each row is corrected for the camera's averaging over ``exposure_s`` (the gain divided by
+       sinc(f·e), as the pitch's frequency response is): the blade's heave, not the frames'. The
+       model needs no correction: the pitch that drives it is averaged alike.
+
+    Returns the rows (empty for a blade whose dwells show no heave) and the model (None when it
+    cannot be fitted and the dwells' ratios cannot tell one either).
+    """
+    rows, model = _flapping(campaign, tracks, fits, pivot, modes, warnings)
+    return [_unaveraged(r, exposure_s) for r in rows], model
+
+
+def _unaveraged(row: HeaveRow, exposure_s: float) -> HeaveRow:
+    """``row`` divided by the exposure's box filter at its frequency, sinc(f·e) (unchanged without an exposure)."""
+    factor = float(np.sinc(row.frequency_hz * exposure_s)) if exposure_s and exposure_s > 0 else 1.0
+    if not 0.0 < factor < 1.0:
+        return row
+    return replace(row, gain=row.gain / factor, gain_stderr=row.gain_stderr / factor,
+                   amplitude_px=row.amplitude_px / factor)
+
+
+def _flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
+              modes: list[ModeFit], warnings: list[str]) -> tuple[list[HeaveRow], HeaveModel | None]:
+    """:func:`flapping` before the exposure's correction."""
+    if pivot is None:
+        return [], None
+    traces = heave_traces(campaign, tracks, pivot)
+    n_dwells = sum(1 for tr in traces if any(t.label == tr.label for t in campaign.sine_tests))
+    start = _mode_of(modes) or []
+    if not start:
+        ratios = heave_model(campaign, heave_response(campaign, tracks, fits, pivot, modes), fits, modes)
+        start = [] if ratios is None else [(m.frequency_hz, m.damping_ratio) for m in ratios.modes]
+    intra = all(tr.intra is not None and len(tr.intra) and bool(np.all(tr.intra)) for tr in tracks.values())
+    whole = fit_heave_traces(traces, start, n_dwells=n_dwells,
+                             gain_systematic_rel=HEAVE_SYSTEMATIC_REL if intra else HEAVE_SYSTEMATIC_REL_PREDICTED)
+    rows = heave_response(campaign, tracks, fits, pivot, modes, axis=whole)
+    model = whole if whole is not None and whole.modes else heave_model(campaign, rows, fits, modes)
+    if not rows or model is None or model.method != "whole traces":
+        return rows, model
+    out = []
+    by_label = {tr.label: tr for tr in traces}
+    for row in rows:
+        test = next(t for t in campaign.sine_tests if t.label == row.label)
+        track, fit, trace = tracks[row.label], fits[row.label], by_label.get(row.label)
+        if trace is None:
+            out.append(row)
+            continue
+        pitch = trace.pitch_from_rest()
+        mode = _unsettled(test, track, trace.start_s, fit, row, model, pitch, _mode_of(modes), fit.window_s)
+        if mode is None:
+            out.append(row)
+            continue
+        # The window starts while the mode still rings from the dwell's start: measured from its settling on
+        # when the dwell records enough of that (MIN_SETTLED_PERIODS of its sine), else the model's.
+        settled = (trace.start_s + _settles_s(mode), fit.window_s[1])
+        if (settled[1] - settled[0]) * test.frequency_hz >= MIN_SETTLED_PERIODS:
+            late = _measured_row(test, track, fit, trace.start_s, trace.heave_px, modes, model, settled)
+            if late is not None and _unsettled(test, track, trace.start_s, fit, late, model, pitch, _mode_of(modes),
+                                               settled) is None:
+                out.append(late)
+                continue
+        need = _settles_s(mode) + MIN_SETTLED_PERIODS / test.frequency_hz
+        warnings.append(
+            f"{row.label}: its heave window starts {fit.window_s[0] - trace.start_s:.2g} s after the input, before the "
+            f"blade's {mode.frequency_hz:.3g} Hz mode (ζ {mode.damping_ratio:.2g}) settles ({_settles_s(mode):.2g} s), "
+            f"and the dwell ends {fit.window_s[1] - trace.start_s:.2g} s after it: the heave stated there is the flapping "
+            f"model's steady state, fitted to the whole traces, not a measurement; record at least {need:.2g} s of this "
+            f"dwell after the input's start to measure it")
+        model_row = _model_row(test, fit, model, heave_systematic_px(track.intra))
+        out.append(model_row if model_row is not None else row)
+    return out, model
+
+
+def _measured_row(test, track: Track, fit: SineFit, t0: float, heave: np.ndarray, modes: list[ModeFit] | None,
+                  axis: HeaveModel | None, window_s: tuple[float, float]) -> HeaveRow | None:
+    """A dwell's heave sine over ``window_s`` (:func:`~servoscope.sysid.heave.dwell_heave`), the axis term taken off first."""
+    e = 0.0 if axis is None else axis.axis_px_per_rad
+    se_e = 0.0 if axis is None or not math.isfinite(axis.axis_stderr_px_per_rad) else axis.axis_stderr_px_per_rad
+    if e:
+        trace = HeaveTrace(test.label, track.angle_time_s, np.where(track.valid, track.angle_rad, np.nan), heave, t0)
+        heave = heave - e * trace.pitch_from_rest()
+    systematic = heave_systematic_px(track.intra)
+    intra = None if track.intra is None else np.asarray(track.intra, dtype=bool)
+    if intra is not None and intra.shape == heave.shape and not np.all(intra):
+        t = np.asarray(track.angle_time_s, float)
+        inside = (t >= window_s[0]) & (t <= window_s[1]) & np.isfinite(heave)
+        if np.count_nonzero(inside & intra) >= MIN_IFRAMES:
+            # A camcorder's GOP: the I-frames show the stickers where they are (the codec check, as the
+            # pitch's sine fit has it); the predicted frames between hold their motion back.
+            heave = np.where(intra, heave, np.nan)
+            systematic = HEAVE_SYSTEMATIC_IFRAME_PX
+    row = dwell_heave(track.angle_time_s, heave, test.frequency_hz, t0, test.amplitude, window_s, test.label,
+                      systematic_px=systematic, mode=_mode_of(modes))
+    if row is not None and se_e:
+        extra = se_e * fit.amplitude / abs(test.amplitude)
+        row = replace(row, gain_stderr=math.hypot(row.gain_stderr, extra),
+                      phase_stderr_deg=math.degrees(math.hypot(math.radians(row.phase_stderr_deg),
+                                                               extra / row.gain if row.gain > 0 else 0.0)))
+    return row
+
+
 def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
-                   modes: list[ModeFit] | None = None) -> list[HeaveRow]:
+                   modes: list[ModeFit] | None = None, axis: HeaveModel | None = None) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
 
     ``modes``: the blade's modes found (the step's first): their ring-downs are fitted
@@ -187,13 +383,16 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     and its error would read as heave at the input frequency). A campaign whose dwells show
     no heave beyond :data:`HEAVE_MIN_Z` standard errors (a rigid blade) gets none, so its
     result is as before.
+
+    ``axis``: the whole traces' model (:func:`~servoscope.sysid.heave_traces.fit_heave_traces`),
+    whose axis term (heave in phase with the pitch, px/rad) is taken off each dwell's heave
+    before its sine is fitted; the term's error times the dwell's pitch amplitude is added to the row's.
     """
     if pivot is None:
         return []
     rows = []
     for test, track, fit, t0, h in _dwell_heaves(campaign, tracks, fits, pivot):
-        row = dwell_heave(track.angle_time_s, h, test.frequency_hz, t0, test.amplitude, fit.window_s, test.label,
-                          systematic_px=heave_systematic_px(track.intra), mode=_mode_of(modes))
+        row = _measured_row(test, track, fit, t0, h, modes, axis, fit.window_s)
         if row is not None:
             rows.append(row)
     if not any(r.gain >= HEAVE_MIN_Z * r.gain_stderr for r in rows):

@@ -20,8 +20,7 @@ from ..markers.track import Track
 from ..parameters import interval95
 from ..sysid import FrequencyResponse, SineFit, check_held, fit_transfer_function, with_gain_scale_uncertainty
 from ..sysid.dead_time import dead_time_estimates
-from .blade import (axis_of, bending_response, blade_modes, dwell_modes, heave_model, heave_response,
-                    step_ringdown_warning)
+from .blade import axis_of, bending_response, blade_modes, dwell_modes, flapping, step_ringdown_warning
 from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dwells, fit_mode
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
@@ -335,20 +334,19 @@ class _BladeMotions(NamedTuple):
 
 
 def _blade_motions(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], step, step_label,
-                   model, warnings: list[str]) -> _BladeMotions:
+                   model, warnings: list[str], exposure_s: float = 0.0) -> _BladeMotions:
     """The blade's modes (step and dwells), heave and bending; the pitch axis found once for them all."""
     step_track = tracks[step_label] if step_label else None
     pivot = axis_of(tracks, fits, step_track)
     modes = blade_modes(step, step_track, model, pivot, (campaign.lead, campaign.trail))
     modes += dwell_modes(campaign, tracks, fits, pivot, model, modes)
-    heave = heave_response(campaign, tracks, fits, pivot, modes)
+    heave, flapped = flapping(campaign, tracks, fits, pivot, modes, warnings, exposure_s=exposure_s)
     bending = bending_response(campaign, tracks, fits, modes)
-    flapping = heave_model(campaign, heave, fits, modes)
-    modes += [m for m in flapping.modes if m.source == "heave_response"] if flapping is not None else []
+    modes += [m for m in flapped.modes if m.source in ("heave_response", "heave_traces")] if flapped is not None else []
     short = step_ringdown_warning(step, step_track, model, step_label or "", modes)
     if short:
         warnings.append(short)
-    return _BladeMotions(modes, heave, bending, flapping)
+    return _BladeMotions(modes, heave, bending, flapped)
 
 
 def mode_warnings(campaign: Campaign, modes) -> list[str]:
@@ -487,7 +485,7 @@ def identify(
         warnings.extend(w for w in [*selection.warnings, *selection.selected.warnings] if w not in warnings)
 
     step, step_label = step_test(campaign, tracks, model, selection, warnings)
-    blade = _blade_motions(campaign, tracks, fits, step, step_label, model, warnings)
+    blade = _blade_motions(campaign, tracks, fits, step, step_label, model, warnings, exposure_s)
     warnings.extend(mode_warnings(campaign, blade.modes))
     warnings.extend(dead_time_warnings(model, step, shared_t0_s, exposure))
     predicted = None

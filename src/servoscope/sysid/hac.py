@@ -52,7 +52,8 @@ def andrews_lag(residual: ArrayLike) -> int:
 
 
 def hac_covariance(
-    jac: NDArray[np.float64], residual: NDArray[np.float64], lag: int | None = None
+    jac: NDArray[np.float64], residual: NDArray[np.float64], lag: int | None = None,
+    groups: NDArray[np.int_] | None = None,
 ) -> NDArray[np.float64]:
     """Newey–West (HAC) covariance of least-squares parameters.
 
@@ -77,6 +78,9 @@ def hac_covariance(
     lag : int, optional
         Largest lag L; default the larger of :func:`newey_west_lag` and
         :func:`andrews_lag` of the residuals, at most ``n // 2``.
+    groups : numpy.ndarray of int, shape (n,), optional
+        Which series each row belongs to (several tests' traces fitted at once): scores are
+        taken as correlated within a series only, lagged products across two are left out.
 
     Returns
     -------
@@ -91,8 +95,9 @@ def hac_covariance(
     L = min(max(newey_west_lag(n), andrews_lag(r)), n // 2) if lag is None else int(lag)
     u = J * r[:, None]
     S = u.T @ u
+    same = None if groups is None else np.asarray(groups)
     for l in range(1, min(L, n - 1) + 1):
-        g = u[l:].T @ u[:-l]
+        g = (u[l:] * (same[l:] == same[:-l])[:, None]).T @ u[:-l] if same is not None else u[l:].T @ u[:-l]
         S += (1.0 - l / (L + 1.0)) * (g + g.T)
     try:
         B = np.linalg.inv(J.T @ J)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -19,14 +19,24 @@ from ..results import jsonable
 from .hac import hac_covariance
 from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit, ringdown_columns
 
-__all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_REL", "HeaveModel", "HeaveRow",
+__all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_IFRAME_PX", "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX",
+           "HEAVE_SYSTEMATIC_REL", "HEAVE_SYSTEMATIC_REL_PREDICTED", "HeaveModel", "HeaveRow",
            "dwell_heave", "fit_heave_model", "heave_systematic_px"]
 
 #: Systematic uncertainty of a dwell's heave amplitude, px, added to the fit's, on footage whose
-#: codec predicts frames from others (H.264, MPEG-2): a rigid blade (quick preset, 720×576, H.264,
-#: seed 3) showed 0.021–0.063 px at its four dwells, 6–16 of the fit's standard errors: the codec
-#: holds the stickers' motion back, and the axis found on the step leaves apparent heave.
-HEAVE_SYSTEMATIC_PX = 0.05
+#: codec predicts frames from others (H.264, MPEG-2): the codec holds each sticker's motion across
+#: the line back, and the heave (the line's place at the axis, a lever beyond the markers) shows it
+#: 90–130° behind the pitch, whatever the amplitude. Rigid blades on the twin (issue 32; 480×384 and
+#: 800×600, 200 frames/s) read 0.03–0.06 px at 8–20 Mbit/s, 0.06–0.08 px at 8 Mbit/s and 800×600,
+#: up to 0.096 px at 4 Mbit/s; MPEG-2 at 15 Mbit/s 0.012–0.017 px. (It was 0.05 px, from one
+#: 720×576 campaign: an 800×600 camera's dwells then read 1.7–2.5 stated errors high, all alike.)
+HEAVE_SYSTEMATIC_PX = 0.1
+#: The same where a dwell's heave is fitted to its I-frames alone (a camcorder's GOP, 8 or more in the
+#: window): H.264 with an I-frame every 12 read ≤ 0.007 px on rigid blades (issue 32).
+HEAVE_SYSTEMATIC_IFRAME_PX = 0.01
+#: κ's relative systematic on footage whose codec predicts frames: the flapping's heave held back or
+#: carried on by the codec alike at every dwell (twin, issue 32: 9.3 Hz mode at 800×600 H.264, κ 0.8 % low).
+HEAVE_SYSTEMATIC_REL_PREDICTED = 0.015
 #: The same on footage of frames coded on their own (raw, image sequences, intra-only codecs): rigid
 #: blades (quick preset, raw, 720×576 and 480×384) showed 0.0009–0.0029 px, flapping ones
 #: 0.001–0.0035 px off the renderer's heave.
@@ -68,6 +78,10 @@ class HeaveRow:
         name (``"extra1"`` …) for that marker's bending across the line.
     colour : str
         That marker's colour as given (``""`` for the heave).
+    source : str
+        ``"measured"``: the sine fitted to the dwell's own window; ``"model"``: the flapping model's
+        steady state at the dwell (fitted to the whole traces), where the dwell's window starts before
+        the blade's mode has settled and cannot show it (:func:`servoscope.campaign.blade.heave_response`).
     """
 
     label: str
@@ -79,6 +93,7 @@ class HeaveRow:
     amplitude_px: float
     marker: str = ""
     colour: str = ""
+    source: str = "measured"
 
     def summary(self) -> dict[str, Any]:
         """Plain types, a row of result.json's ``heave_response`` (or, with a marker, ``bending_response``)."""
@@ -86,13 +101,13 @@ class HeaveRow:
                          "video": self.label, "frequency_hz": self.frequency_hz, "gain": self.gain,
                          "gain_stderr": self.gain_stderr, "phase_deg": self.phase_deg,
                          "phase_stderr_deg": self.phase_stderr_deg, "amplitude_px": self.amplitude_px,
-                         "units": "px per input unit"})
+                         "units": "px per input unit", "source": self.source})
 
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> "HeaveRow":
         """The row back from :meth:`summary`'s dict."""
         return cls(d["video"], d["frequency_hz"], d["gain"], d["gain_stderr"], d["phase_deg"], d["phase_stderr_deg"],
-                   d["amplitude_px"], d.get("marker", ""), d.get("colour", ""))
+                   d["amplitude_px"], d.get("marker", ""), d.get("colour", ""), d.get("source", "measured"))
 
 
 def dwell_heave(time_s: np.ndarray, heave: np.ndarray, frequency_hz: float, t0_s: float, amplitude: float,
@@ -156,6 +171,16 @@ class HeaveModel(FitResult):
     chi2_reduced : float
         The fit's χ² over its degrees of freedom (errors widened by its square root when above 1).
     n_dwells : int
+    method : str
+        ``"dwell ratios"``: fitted to each dwell's heave over its pitch (:func:`fit_heave_model`);
+        ``"whole traces"``: to every test's heave per frame, each mode driven by the measured pitch
+        (:func:`servoscope.sysid.heave_traces.fit_heave_traces`).
+    axis_px_per_rad, axis_stderr_px_per_rad : float
+        The whole traces' axis term: heave in phase with the pitch at every frequency, px per rad
+        (an axis found that far off along the chord); 0 and NaN for the dwell ratios' fit.
+    covariance : tuple of tuple of float, or None
+        Covariance of (κ, frequency, damping ratio) of each mode in turn (the whole traces' fit):
+        the per-dwell heave made from the model carries it (:meth:`ratio_stderr`).
     """
 
     gains_px_per_rad: tuple[float, ...]
@@ -163,6 +188,10 @@ class HeaveModel(FitResult):
     modes: tuple[ModeFit, ...]
     chi2_reduced: float
     n_dwells: int
+    method: str = "dwell ratios"
+    axis_px_per_rad: float = 0.0
+    axis_stderr_px_per_rad: float = math.nan
+    covariance: tuple[tuple[float, ...], ...] | None = None
 
     model_name = "heave/pitch = Σ κ·ω²/(ωm² − ω² + 2j·ζ·ωm·ω) (the blade's flapping modes)"
 
@@ -180,11 +209,14 @@ class HeaveModel(FitResult):
                                  unit="px/rad"))
             out += [Parameter(f"{p.name}{suffix}", p.value, p.stderr, p.ci95, vary=p.vary, min=p.min, unit=p.unit,
                               interval=p.interval) for p in m.parameters.values()]
+        if self.method == "whole traces":
+            e, se = self.axis_px_per_rad, self.axis_stderr_px_per_rad
+            out.append(Parameter("axis_px_per_rad", float(e), float(se), interval95(e, se, "normal"), unit="px/rad"))
         return Parameters(out)
 
     def fit_statistics(self) -> dict[str, Any]:
-        """Dwells fitted and the fit's reduced χ²."""
-        return {"dwells": int(self.n_dwells), "reduced chi-square": float(self.chi2_reduced)}
+        """Dwells fitted, the fit's reduced χ² and what it was fitted to."""
+        return {"fitted to": self.method, "dwells": int(self.n_dwells), "reduced chi-square": float(self.chi2_reduced)}
 
     @property
     def gain_px_per_rad(self) -> float:
@@ -208,6 +240,26 @@ class HeaveModel(FitResult):
             out = out + _mode_term(w, kappa, m.frequency_hz, m.damping_ratio)
         return out
 
+    def ratio_stderr(self, frequency_hz: float) -> float:
+        """The standard error of :meth:`ratio`'s modulus at ``frequency_hz`` (px per rad), from :attr:`covariance`
+        by the delta method (central differences); NaN without a covariance."""
+        if self.covariance is None:
+            return math.nan
+        x = np.array([v for k, m in zip(self.gains_px_per_rad, self.modes) for v in (k, m.frequency_hz, m.damping_ratio)])
+        w = np.array([2.0 * math.pi * float(frequency_hz)])
+
+        def modulus(v):
+            return float(abs(sum(_mode_term(w, v[3 * j], v[3 * j + 1], v[3 * j + 2]) for j in range(len(self.modes)))[0]))
+        grad = np.zeros(x.size)
+        for k in range(x.size):
+            step = 1e-6 * max(abs(x[k]), 1e-3)
+            up, down = x.copy(), x.copy()
+            up[k] += step
+            down[k] -= step
+            grad[k] = (modulus(up) - modulus(down)) / (2.0 * step)
+        cov = np.asarray(self.covariance, dtype=float)
+        return math.sqrt(max(float(grad @ cov @ grad), 0.0))
+
     def summary(self) -> dict[str, Any]:
         """Plain types, result.json's ``heave_model``: the first mode's terms, and every mode's in ``modes``."""
         def terms(kappa, se, m):
@@ -218,7 +270,11 @@ class HeaveModel(FitResult):
         all_terms = [terms(*x) for x in zip(self.gains_px_per_rad, self.gain_stderrs_px_per_rad, self.modes)]
         return jsonable({"model": "heave/pitch = sum of kappa*w^2/(wm^2 - w^2 + 2j*zeta*wm*w)", **all_terms[0],
                          **({"modes": all_terms} if len(all_terms) > 1 else {}),
-                         "chi2_reduced": self.chi2_reduced, "n_dwells": self.n_dwells})
+                         "chi2_reduced": self.chi2_reduced, "n_dwells": self.n_dwells, "method": self.method,
+                         **({"axis_px_per_rad": self.axis_px_per_rad,
+                             "axis_stderr_px_per_rad": self.axis_stderr_px_per_rad,
+                             "covariance": [list(r) for r in self.covariance or ()]}
+                            if self.method == "whole traces" else {})})
 
     @classmethod
     def from_summary(cls, d: dict[str, Any]) -> "HeaveModel":
@@ -229,8 +285,14 @@ class HeaveModel(FitResult):
         modes = tuple(ModeFit(t["frequency_hz"], nan_if_none(t["stderr"]["frequency_hz"]), t["damping_ratio"],
                               nan_if_none(t["stderr"]["damping_ratio"]), abs(t["gain_px_per_rad"]),
                               "held" if t.get("held") else "heave_response") for t in terms)
+        method = d.get("method", "dwell ratios")
+        if method == "whole traces":
+            modes = tuple(replace(m, source="heave_traces") if m.source != "held" else m for m in modes)
+        cov = d.get("covariance")
         return cls(tuple(t["gain_px_per_rad"] for t in terms), tuple(t["gain_stderr_px_per_rad"] for t in terms), modes,
-                   d["chi2_reduced"], d["n_dwells"])
+                   nan_if_none(d["chi2_reduced"]), d["n_dwells"], method, d.get("axis_px_per_rad", 0.0),
+                   nan_if_none(d.get("axis_stderr_px_per_rad")),
+                   None if not cov else tuple(tuple(float(nan_if_none(v)) for v in row) for row in cov))
 
 
 def _mode_term(w: np.ndarray, kappa: float, frequency_hz: float, damping_ratio: float) -> np.ndarray:
