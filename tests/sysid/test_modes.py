@@ -139,6 +139,7 @@ def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
         pitch = servo["gain"] * servo["natural_frequency_rad_s"] ** 2 / (
             servo["natural_frequency_rad_s"] ** 2 - w**2 + 2j * servo["damping_ratio"] * servo["natural_frequency_rad_s"] * w)
         steady = abs(40.0 * w**2 / ((2 * np.pi * 9.0) ** 2 - w**2 + 2j * 0.03 * 2 * np.pi * 9.0 * w) * pitch)
+        assert tt["heave_steady"]["gain_px_per_unit"] == pytest.approx(steady, rel=1e-9)  # truth states it too
         assert abs(rows[test.label]["gain"] - steady) < 3 * rows[test.label]["gain_stderr"], (test.label, steady)
         if rows[test.label]["amplitude_px"] < 0.1 or rows[test.label]["source"] != "measured":
             continue

@@ -12,7 +12,7 @@ from .presets import CampaignPreset
 from .scene import Scene
 from .servo import InputSignal
 
-__all__ = ["blade_modes_of", "shape_along_chord", "mode_shape", "mode_heaves_px"]
+__all__ = ["blade_modes_of", "shape_along_chord", "mode_shape", "mode_heaves_px", "steady_heave"]
 
 
 def blade_modes_of(preset: CampaignPreset) -> list[tuple[float, float, float, float]]:
@@ -73,3 +73,15 @@ def mode_heaves_px(preset: CampaignPreset, signal: InputSignal, time_s: np.ndarr
         # Before the first fine sample the blade is at rest (np.interp holds the first value, 0).
         out.append(np.interp(at, fine, np.asarray(q.outputs, dtype=float)) @ w_avg)
     return np.array(out)
+
+
+def steady_heave(preset: CampaignPreset, frequency_hz: float) -> complex:
+    """The blade's steady heave at ``frequency_hz`` against the input, px per input unit (complex: its phase
+    against the input's sine): each mode's ``κ·ω²/(ωm² − ω² + 2jζ·ωm·ω)`` times the servo's linear response
+    with its dead time. The instantaneous heave, not averaged over an exposure: the blade's, not the frames'."""
+    w = 2.0 * math.pi * float(frequency_hz)
+    servo = preset.servo
+    pitch = np.polyval(servo.num, 1j * w) / np.polyval(servo.den, 1j * w) * np.exp(-1j * w * servo.dead_time_s)
+    ratio = sum(k * w * w / ((2.0 * math.pi * hz) ** 2 - w * w + 2j * z * 2.0 * math.pi * hz * w)
+                for hz, z, k, _ in blade_modes_of(preset))
+    return complex(ratio * pitch)

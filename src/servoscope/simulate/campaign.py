@@ -8,6 +8,7 @@ looks at it obliquely) and the LED level.
 
 from __future__ import annotations
 
+import cmath
 import json
 import math
 
@@ -31,7 +32,7 @@ from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angl
 from .servo import InputSignal, ServoModel
 from .._io import atomic_path, write_text_atomic
 from .board import PLANE_MM_PER_PX, render_board_photo
-from .blade_modes import shape_along_chord, blade_modes_of, mode_heaves_px, mode_shape
+from .blade_modes import shape_along_chord, blade_modes_of, mode_heaves_px, mode_shape, steady_heave
 from .manifest import TWIN_HEADER, twin_campaign
 
 #: A preset's default real-camera options, to tell which ones a campaign set.
@@ -530,8 +531,17 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
                        **({"shape": _shape_truth(scene, bend)} if scene.extra_stickers or bend else {})}
                       for hz, z, k, bend in blade_modes_of(p)]} if p.blade_mode_hz > 0 else {}),
         "input_units": p.input_units,
-        "tests": tests,
+        "tests": [_with_steady_heave(p, t) for t in tests] if p.blade_mode_hz > 0 else tests,
     }
+
+
+def _with_steady_heave(p: CampaignPreset, test: dict) -> dict:
+    """A sine test's truth with the blade's steady heave at its frequency (``heave_steady``: px per input unit and
+    degrees against the input), beside its whole trace (``heave_px``): what a dwell long enough would show."""
+    if test.get("kind") != "sine":
+        return test
+    z = steady_heave(p, test["frequency_hz"])
+    return {**test, "heave_steady": {"gain_px_per_unit": abs(z), "phase_deg": math.degrees(cmath.phase(z))}}
 
 
 def led_placed(p: CampaignPreset, scene: Scene) -> Scene:
