@@ -113,6 +113,7 @@ def print_blade_motions(result, truth: dict | None) -> None:
     from rich.table import Table
 
     from .numbers import format_interval, format_with_uncertainty
+    from .sysid.modes import MODE_SOURCES
 
     true = ((truth or {}).get("modes") or [{}])[0]
     table = Table(title="the blade's modes (its heave across the chord)")
@@ -122,7 +123,7 @@ def print_blade_motions(result, truth: dict | None) -> None:
     for m in result.modes:
         f, fe = format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz)
         z, ze = format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr)
-        table.add_row(m.source, f"{f} ± {fe}",
+        table.add_row(MODE_SOURCES.get(m.source, m.source), f"{f} ± {fe}",
                       format_interval(*m.ci95["frequency_hz"], m.frequency_stderr_hz),
                       f"{z} ± {ze}",
                       format_interval(*m.ci95["damping_ratio"], m.damping_ratio_stderr),

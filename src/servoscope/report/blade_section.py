@@ -9,6 +9,7 @@ import numpy as np
 
 from ..camera.plane_map import recorded_points
 from ..numbers import format_interval, format_value, format_with_uncertainty
+from ..sysid.modes import MODE_SOURCES
 from .figures import blade_frame_figure, heave_figure
 from .html import ReportSection
 
@@ -16,10 +17,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..campaign.result import IdentificationResult
 
 __all__ = ["blade_section"]
-
-
-_SOURCES = {"step": "the step's ring-down", "dwells": "the dwells' ring-downs",
-            "heave_response": "the heave's frequency response", "heave_traces": "the heave's whole traces"}
 
 
 def blade_section(result: "IdentificationResult", figures_dir) -> ReportSection:
@@ -31,7 +28,7 @@ def blade_section(result: "IdentificationResult", figures_dir) -> ReportSection:
     if result.modes:
         s.table(["blade mode, from", "frequency (Hz)", "± s.e.", "95 % interval", "damping ratio", "± s.e.",
                  "95 % interval"],
-                [[_SOURCES.get(m.source, m.source),
+                [[MODE_SOURCES.get(m.source, m.source),
                   *format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz),
                   format_interval(*m.ci95["frequency_hz"], m.frequency_stderr_hz),
                   *format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr),

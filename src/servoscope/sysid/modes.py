@@ -25,7 +25,7 @@ from servoscope.results import jsonable
 
 from .hac import hac_covariance
 
-__all__ = ["ModeFit", "ModeShape", "fit_damped_mode", "fit_damped_modes", "fit_mode_shape", "fit_mode_shapes",
+__all__ = ["MODE_SOURCES", "ModeFit", "ModeShape", "fit_damped_mode", "fit_damped_modes", "fit_mode_shape", "fit_mode_shapes",
            "pool_modes", "ringdown_columns"]
 
 #: A ring-down is taken as seen when its amplitude is this many times the signal's noise.
@@ -40,6 +40,10 @@ MODE_SYSTEMATIC = {"frequency": 0.004, "damping": 0.08}
 #: fit can also read as a sinusoid (seen on a rigid blade at 720×576, quick preset seed 3:
 #: "13.4 Hz, ζ 0.88") is not a mode.
 MAX_MODE_DAMPING = 0.2
+#: Where a mode was seen (:attr:`ModeFit.source`), in words for tables and reports.
+MODE_SOURCES = {"step": "the step's ring-down", "dwells": "the dwells' ring-downs",
+                "heave_response": "the heave's frequency response", "heave_traces": "the heave's whole traces",
+                "held": "held at the step's"}
 
 
 @dataclass(frozen=True)
