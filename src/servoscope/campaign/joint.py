@@ -126,9 +126,15 @@ def servo_traces(campaign: Campaign, tracks: dict[str, Track], windows: dict[str
                                  np.asarray(track.angle_time_s[v], float), np.asarray(track.angle_rad[v], float),
                                  float(noise) if noise and noise > 0 else 1e-4, exposure_s,
                                  windows.get(test.label), 0.5 * float(separation) if separation else math.nan,
-                                 *((test.from_hz, test.to_hz, test.duration_s, test.shape or "log")
-                                   if test.kind == "sweep" else ())))
+                                 *(_sweep_fields(test) if test.kind == "sweep" else ())))
     return traces
+
+
+def _sweep_fields(test) -> tuple:
+    """A sweep's ServoTrace fields: its chirp's, or a recorded input's band, length and samples (its own command)."""
+    if test.recorded:
+        return (*test.sweep_band_hz, test.input_duration_s, None, (test.input_time_s, test.input_command))
+    return test.from_hz, test.to_hz, test.duration_s, test.shape or "log"
 
 
 def servo_model(campaign: Campaign, tracks: dict[str, Track], windows: dict[str, tuple[float, float]],

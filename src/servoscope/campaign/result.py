@@ -34,6 +34,7 @@ from ..sysid.step import unit_step_function
 from ..sysid.sweep_result import SweepResponse
 from .headline import SOURCE_KEYS, TIME_DOMAIN_KEY, Headline, chosen_dead_time, headline
 from .manifest import Campaign, TestSpec
+from .recorded_input import recorded_input_entry, recorded_input_fields
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -267,8 +268,9 @@ class IdentificationResult:
                 "t0_uncertainty_s": input_start_stderr(test, track),
                 "warnings": list(track.warnings),
             }
-            if test.kind == "sweep":
-                entry.update(from_hz=test.from_hz, to_hz=test.to_hz, duration_s=test.duration_s, shape=test.shape)
+            if test.kind == "sweep":  # a recorded input's file, band and samples too
+                entry.update(from_hz=test.from_hz, to_hz=test.to_hz, duration_s=test.duration_s, shape=test.shape,
+                             **(recorded_input_entry(test) if test.recorded else {}))
             pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
             entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
             if track.reference_angle_rad is not None:
@@ -482,7 +484,8 @@ class IdentificationResult:
             tracks[label] = track
             tests.append(TestSpec(video=Path(entry["video"]), kind=entry["kind"], amplitude=entry["amplitude"],
                                   frequency_hz=entry.get("frequency_hz"), label=label,
-                                  **{k: entry[k] for k in ("from_hz", "to_hz", "duration_s", "shape") if k in entry}))
+                                  **{k: entry[k] for k in ("from_hz", "to_hz", "duration_s", "shape") if k in entry},
+                                  **recorded_input_fields(entry, path)))
             if sf is not None:
                 lo, hi = sf["window_s"]
                 inside = track.valid & (track.angle_time_s >= lo) & (track.angle_time_s <= hi)

@@ -36,7 +36,7 @@ _PLAN_KEYS = {"fps", "update_hz", "settle_s", "periods", "min_seconds", "lead_in
               "drive"}
 _PLAN_POSITIVE = ("fps", "update_hz", "periods")  # > 0; the other numbers ≥ 0
 _DWELL_KEYS = {"duration_s", "warnings", "max_late_ms"}
-_PLAN_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label", *SWEEP_KEYS}
+_PLAN_TEST_KEYS = {"video", "kind", "frequency_hz", "amplitude", "label", *SWEEP_KEYS} - {"input"}
 
 
 class Problems:
@@ -394,7 +394,8 @@ def tests_section(data: dict, base: Path, problems: Problems, camera: dict, *, c
             continue
         problems.unknown(where, entry.keys(), _TEST_KEYS | set(MANIFEST_KEYS))
         ok, video, default_label = _test_source(problems, where, i, entry, base, stems, planned)
-        input_ok, kind, amplitude, frequency, sweep = check_input(problems, where, entry, stated_fps(data, entry))
+        input_ok, kind, amplitude, frequency, sweep = check_input(problems, where, entry, stated_fps(data, entry),
+                                                                  base)
         ok = ok and input_ok
         t0 = None
         if "t0_s" in entry:
@@ -474,7 +475,11 @@ def plan_section(data: dict, problems: Problems, *, planned: bool = False) -> di
     tests = data.get("tests")
     for i, entry in enumerate(tests if isinstance(tests, list) else (), start=1):
         if isinstance(entry, dict):
-            for key in entry.keys() - _PLAN_TEST_KEYS:
+            if "input" in entry:  # the rig generates its inputs; a pilot's recording it cannot replay
+                problems.add(f"tests[{i}].input", "servoscope drive plays sines, steps and chirps, not a recorded "
+                             "input: fly it yourself with the LED switching at its start, and list the video with "
+                             "input = … in a campaign.toml (not a plan)")
+            for key in entry.keys() - _PLAN_TEST_KEYS - {"input"}:
                 problems.add(f"tests[{i}].{key}", f"not in a plan (a plan's tests take {', '.join(sorted(_PLAN_TEST_KEYS))})")
     _plan_dwells(plan_t, len(tests) if isinstance(tests, list) else 0, problems)
     return dict(plan_t)

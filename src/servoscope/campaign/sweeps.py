@@ -1,7 +1,8 @@
 """A campaign's frequency sweeps: each one's spectral frequency response, and one response from every test.
 
 Steps of :func:`servoscope.campaign.runner.identify` (issue 31). A sweep's input is known (the
-chirp of its ``[[tests]]`` entry, :meth:`~servoscope.campaign.manifest.TestSpec.command`)
+chirp of its ``[[tests]]`` entry, or its recorded input ``input = "u.csv"``: a pilot's stick,
+:meth:`~servoscope.campaign.manifest.TestSpec.command`)
 from the instant the LED dates; its output is the tracked angle. :func:`sweep_responses`
 turns each into a :class:`~servoscope.sysid.sweep_result.SweepResponse` (CIFER's composite
 of windowed cross-spectra with coherence, :func:`servoscope.sysid.sweep.sweep_response`);
@@ -40,8 +41,9 @@ def sweep_responses(campaign: Campaign, tracks: dict[str, Track], warnings: list
             continue
         y = np.where(track.valid, track.angle_rad, np.nan)
         try:
+            from_hz, to_hz = _band(test, track, warnings)
             response = sweep_response(track.angle_time_s, test.command(track.angle_time_s - t0), y,
-                                      from_hz=float(test.from_hz), to_hz=float(test.to_hz))
+                                      from_hz=from_hz, to_hz=to_hz)
             response.to_frequency_response()  # refuses a sweep with no coherent frequency, named below
         except ServoscopeError as exc:
             warnings.append(f"{test.label}: sweep left out: {exc}")
@@ -53,6 +55,34 @@ def sweep_responses(campaign: Campaign, tracks: dict[str, Track], warnings: list
             warnings.append(f"{test.label}: {low} of {len(response)} frequencies have coherence below "
                             f"{response.coherence_min:g} (the output there is not the input's): left out of the fit")
     return out
+
+
+def _band(test, track: Track, warnings: list[str]) -> tuple[float, float]:
+    """The band a sweep is analysed in: its chirp's, or a recorded input's (given, or its own spectrum's).
+
+    A recorded input's own band (:attr:`~servoscope.campaign.inputs.TestSpec.sweep_band_hz`) may
+    start below what the record resolves: its bottom is raised, silently, to where half the
+    record (the longest window :func:`~servoscope.sysid.sweep.sweep_response` takes) holds two
+    periods. It may reach past what the camera resolves: it is cut at 0.45 of the frame rate,
+    with a warning. A band the manifest gives is its author's and is not cut (a top at the Nyquist frequency is
+    refused by :func:`~servoscope.sysid.sweep.sweep_response`, and the sweep left out, saying why).
+    """
+    from_hz, to_hz = test.sweep_band_hz
+    if not test.recorded:
+        return from_hz, to_hz
+    time_s = np.asarray(track.angle_time_s, dtype=float)
+    dt = np.diff(time_s)
+    fs = 1.0 / float(np.median(dt)) if dt.size else np.inf
+    if test.from_hz is None and dt.size:
+        from_hz = max(from_hz, 1.01 * 4.0 / (time_s[-1] - time_s[0] + 1.0 / fs))
+    if test.to_hz is None and to_hz >= 0.45 * fs:
+        warnings.append(f"{test.label}: the recorded input's band reaches {to_hz:.3g} Hz, past what "
+                        f"{fs:.4g} frames/s resolve: analysed up to {0.45 * fs:.3g} Hz (give to_hz to choose)")
+        to_hz = 0.45 * fs
+    if not to_hz > from_hz:
+        raise ServoscopeError(f"the recorded input's band is empty once cut to what the record and the camera "
+                              f"resolve ({from_hz:.3g}–{to_hz:.3g} Hz): give from_hz and to_hz")
+    return from_hz, to_hz
 
 
 def sweeps_t0_stderr(campaign: Campaign, tracks: dict[str, Track], sweeps: dict[str, SweepResponse]) -> float:

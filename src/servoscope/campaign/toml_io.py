@@ -132,6 +132,8 @@ def test_entries(c: Campaign) -> list[dict[str, Any]]:
             **{k: None if getattr(t, k, None) is None else float(getattr(t, k))
                for k in ("from_hz", "to_hz", "duration_s")},
             "shape": getattr(t, "shape", None),
+            # A recorded input's file, relative to the manifest written where it can be (as the videos).
+            "input": None if getattr(t, "input_file", None) is None else _relative(t.input_file, base),
             "amplitude": float(t.amplitude), "t0_s": None if t.t0_s is None else float(t.t0_s),
         }.items() if v is not None})
     return out

@@ -35,7 +35,12 @@ def _time_figure(result: "IdentificationResult", label: str) -> Figure:
     fig, (ax_u, ax_y) = plt.subplots(2, 1, figsize=(7.5, 4.6), sharex=True)
     ax_u.plot(t, test.command(t), lw=0.8, color="0.3")
     ax_u.set_ylabel(f"command ({result.campaign.input_units or 'input units'})")
-    ax_u.set_title(f"{label}: {test.shape} sweep {test.from_hz:g}–{test.to_hz:g} Hz over {test.duration_s:g} s")
+    if test.recorded:  # a pilot's (or any) recorded input: its file and its band
+        lo, hi = test.sweep_band_hz
+        ax_u.set_title(f"{label}: recorded input {test.input_file.name}, band {lo:.3g}–{hi:.3g} Hz, "
+                       f"{test.input_duration_s:g} s")
+    else:
+        ax_u.set_title(f"{label}: {test.shape} sweep {test.from_hz:g}–{test.to_hz:g} Hz over {test.duration_s:g} s")
     y = np.where(track.valid, track.angle_rad, np.nan)
     ax_y.plot(t, np.degrees(y - np.nanmedian(y[t < 0])) if np.any(t < 0) else np.degrees(y), lw=0.8, color="C0")
     ax_y.set_ylabel("blade angle (deg, from rest)")

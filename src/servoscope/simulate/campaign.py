@@ -29,6 +29,7 @@ from .render import FrameRenderer
 from ..defaults import REFERENCE_COLOURS
 from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
+from .pilot import pilot_input, record_pilot
 from .servo import InputSignal, ServoModel
 from .._io import atomic_path, write_text_atomic
 from .board import PLANE_MM_PER_PX, render_board_photo
@@ -343,14 +344,17 @@ def _test_plan(p: CampaignPreset, suffix: str) -> list[tuple[str, str, float | N
                 for k, f in enumerate(p.frequencies_hz)]
     if p.sweep is not None:
         plan.append((f"sweep_{p.sweep[0]:.2f}-{p.sweep[1]:.2f}Hz{suffix}", "sweep", None, p.sine_amplitude))
+    if p.piloted_sweep is not None:
+        lo, hi, _ = p.piloted_sweep
+        plan.append((f"piloted_{lo:.2f}-{hi:.2f}Hz{suffix}", "piloted", None, p.sine_amplitude))
     if p.include_step:
         plan.append((f"step{suffix}", "step", None, p.step_amplitude))
     return plan
 
 
-def _test_signal(p: CampaignPreset, kind: str, freq: float | None, amplitude: float, t0: float
+def _test_signal(p: CampaignPreset, kind: str, freq: float | None, amplitude: float, t0: float, seed: int = 0
                  ) -> tuple[InputSignal, float]:
-    """A test's input starting at ``t0`` and the length of its video."""
+    """A test's input starting at ``t0`` and the length of its video (``seed``: a piloted sweep's wander)."""
     if kind == "sine":
         signal = InputSignal("sine", amplitude, freq, t0_s=t0)
         duration = p.dwell_duration_s(freq, t0)
@@ -358,6 +362,9 @@ def _test_signal(p: CampaignPreset, kind: str, freq: float | None, amplitude: fl
         signal = InputSignal("sweep", amplitude, t0_s=t0, from_hz=p.sweep[0], to_hz=p.sweep[1],
                              duration_s=p.sweep[2], shape=p.sweep_shape)
         duration = p.sweep_video_duration_s(t0)
+    elif kind == "piloted":
+        signal = InputSignal("recorded", amplitude, t0_s=t0, samples=pilot_input(*p.piloted_sweep, amplitude, seed))
+        duration = p.sweep_video_duration_s(t0, p.piloted_sweep)
     else:
         signal = InputSignal("step", p.step_amplitude, t0_s=t0)
         duration = t0 + p.step_after_t0_s
@@ -384,7 +391,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
         noise_sigma_dn=0, frequencies_hz=(1.0, 2.0), servo=ServoModel(...)``;
         ``readout_s=0.015`` (with ``fps=50, exposure_s=0.02``) films with a
         rolling shutter (see docs/twin.md); ``sweep=(from_hz, to_hz, duration_s)``
-        (and ``sweep_shape="linear"``) adds a frequency-sweep test.
+        (and ``sweep_shape="linear"``) adds a frequency-sweep test;
+        ``piloted_sweep=(from_hz, to_hz, duration_s)`` a pilot's sweep, recorded as ``u.csv``.
 
     Returns
     -------
@@ -449,8 +457,12 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
             frac = p.t0_frame_phase  # drawn all the same: the noise seeds keep their values
         t0 = float((round(p.pre_roll_s * fps) + frac) / fps)
         noise_seed = int(rng.integers(0, 2**63 - 1))
-        signal, duration = _test_signal(p, kind, freq, amplitude, t0)
+        # Drawn only for a piloted sweep, after the noise seed: the other tests' draws keep their values.
+        pilot_seed = int(rng.integers(0, 2**63 - 1)) if kind == "piloted" else 0
+        signal, duration = _test_signal(p, kind, freq, amplitude, t0, pilot_seed)
         rec = render_test(out / name, p, scene, signal, duration, noise_seed)
+        if kind == "piloted":
+            rec.update(record_pilot(out, p.piloted_sweep, signal.samples))
         tests.append({"video": name, **rec})
 
     truth = _truth(p, seed, camera, fps, scene, tests)

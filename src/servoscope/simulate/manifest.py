@@ -13,6 +13,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from ..campaign.manifest import Campaign, TestSpec
+from ..campaign.recorded_input import peak_command, read_input_file
 from ..campaign.toml_io import test_entries
 from ..campaign.sections import default_labels
 from ..defaults import REFERENCE_COLOURS, SETTLE_S
@@ -46,7 +47,8 @@ def twin_campaign(p: CampaignPreset, scene: Scene, tests: list[dict], path: Path
         What was filmed (the markers' colours, the extra stickers).
     tests : list of dict
         Each recording's ``video`` (name in the folder), ``kind``, ``frequency_hz`` (sines), ``from_hz``,
-        ``to_hz``, ``duration_s`` and ``shape`` (sweeps) and ``amplitude``.
+        ``to_hz``, ``duration_s`` and ``shape`` (sweeps), ``input`` (a piloted sweep's file in the folder,
+        which gives its samples and amplitude) and ``amplitude``.
     path : Path
         The manifest file.
     frames_fps : Fraction, optional
@@ -58,8 +60,13 @@ def twin_campaign(p: CampaignPreset, scene: Scene, tests: list[dict], path: Path
     for t in tests:
         video, frames = _recording(p, folder, t["video"], frames_fps)
         sweep = ({"from_hz": float(t["from_hz"]), "to_hz": float(t["to_hz"]), "duration_s": float(t["duration_s"]),
-                  "shape": t["shape"]} if t["kind"] == "sweep" else {})
-        specs.append(TestSpec(video, t["kind"], float(t["amplitude"]),
+                  "shape": t["shape"]} if t["kind"] == "sweep" and not t.get("input") else {})
+        amplitude = float(t["amplitude"])
+        if t.get("input"):  # a piloted sweep: its recorded input, with no band (the file's own spectrum gives it)
+            time_s, command = read_input_file(folder / t["input"])
+            sweep = {"input_file": folder / t["input"], "input_time_s": time_s, "input_command": command}
+            amplitude = peak_command(command)
+        specs.append(TestSpec(video, t["kind"], amplitude,
                               float(t["frequency_hz"]) if t["kind"] == "sine" else None, frames=frames, **sweep))
     # Monochrome footage: every marker (and the LED) told by brightness.
     lead, trail, led = (("bright",) * 3 if p.monochrome else (scene.lead_colour, scene.trail_colour, scene.led_colour))

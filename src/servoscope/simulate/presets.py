@@ -212,6 +212,12 @@ class CampaignPreset:
         (the default): no sweep.
     sweep_shape : {"log", "linear"}
         The sweep's frequency law (:func:`servoscope.sysid.inputs.sweep_command`).
+    piloted_sweep : (float, float, float) or None
+        A piloted sweep ``(from_hz, to_hz, duration_s)`` after the chirp (before the step): a
+        pilot's stick swept over the band in that time, its frequency and swing wandering
+        (:func:`servoscope.simulate.pilot.pilot_input`, of mean swing ``sine_amplitude``), recorded
+        as ``u.csv`` beside the video and named by the manifest's ``input = "u.csv"``; its LED and
+        video as a sweep's. None (the default): none.
     """
 
     name: str
@@ -274,9 +280,12 @@ class CampaignPreset:
     led_distractors: bool = False
     sweep: tuple[float, float, float] | None = None
     sweep_shape: str = "log"
+    piloted_sweep: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         self._check_camera_options()
+        if self.piloted_sweep is not None:
+            object.__setattr__(self, "piloted_sweep", self._band("piloted_sweep", self.piloted_sweep))
         if self.sweep is not None:
             try:
                 lo, hi, dur = (float(v) for v in self.sweep)
@@ -309,7 +318,7 @@ class CampaignPreset:
         object.__setattr__(self, "frequencies_hz", freqs)
         if self.exposure_s is None:
             object.__setattr__(self, "exposure_s", 1.0 / float(Fraction(self.fps).limit_denominator(1_000_000)))
-        if not freqs and not self.include_step and self.sweep is None:
+        if not freqs and not self.include_step and self.sweep is None and self.piloted_sweep is None:
             raise ServoscopeError("a campaign needs at least one test")
         if not (self.noise_sigma_dn >= 0 and self.exposure_s >= 0 and self.pre_roll_s >= 0 and self.settle_s >= 0):
             raise ServoscopeError("noise_sigma_dn, exposure_s, pre_roll_s and settle_s must be >= 0")
@@ -397,9 +406,24 @@ class CampaignPreset:
         """Length of the sine dwell at ``frequency_hz`` that starts at ``t0_s``."""
         return t0_s + self.settle_s + max(self.min_dwell_s, self.min_periods / frequency_hz)
 
-    def sweep_video_duration_s(self, t0_s: float) -> float:
-        """Length of the sweep test's video whose input starts at ``t0_s``: the sweep, then ``settle_s``."""
-        return t0_s + self.sweep[2] + self.settle_s
+    def sweep_video_duration_s(self, t0_s: float, sweep: tuple[float, float, float] | None = None) -> float:
+        """Length of the sweep test's video whose input starts at ``t0_s``: the sweep (``sweep``, else the
+        chirp's), then ``settle_s``."""
+        return t0_s + (sweep or self.sweep)[2] + self.settle_s
+
+    def _band(self, name: str, value) -> tuple[float, float, float]:
+        """A ``(from_hz, to_hz, duration_s)`` setting, checked: numbers, ``0 < from < to`` below half the frame rate."""
+        try:
+            lo, hi, dur = (float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ServoscopeError(f"{name} must be (from_hz, to_hz, duration_s), not {value!r}") from None
+        problems = sweep_problems(lo, hi, dur, "log")
+        if problems:
+            raise ServoscopeError(f"{name}: " + "; ".join(f"{k}: {m}" for k, m in problems))
+        fps = float(Fraction(self.fps).limit_denominator(1_000_000))
+        if hi >= 0.5 * fps:
+            raise ServoscopeError(f"{name}: to_hz ({hi:g} Hz) must be below half the frame rate ({fps:g} frames/s)")
+        return lo, hi, dur
 
     def camera(self) -> CameraModel:
         """The true camera, its intrinsics scaled from the reference size."""

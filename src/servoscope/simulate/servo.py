@@ -27,8 +27,8 @@ first-order-hold discretisation of G (the input is linear between grid
 points, which is exact for a rate-limited ramp); backlash is applied on the
 same grid and the output is interpolated linearly to the sample times.
 
-A sweep (an arbitrary input, no generator of a few states) takes that grid
-simulation too, linear model or not. Its error is the input's linear
+A sweep or a recorded input (an arbitrary input, no generator of a few states) takes
+that grid simulation too, linear model or not. Its error is the input's linear
 interpolation between grid points, at most ``A·(2π f dt)²/8`` (1.1e-5 of the
 amplitude at 15 Hz), and the output's between them, of the same order: the
 tests hold it to python-control's ``forced_response`` of the delayed input.
@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import control
@@ -50,7 +50,7 @@ import scipy.signal
 from numba import njit
 
 from ..errors import ServoscopeError
-from ..sysid.inputs import sweep_command, sweep_problems
+from ..sysid.inputs import recorded_command, sweep_command, sweep_problems
 
 __all__ = ["InputSignal", "ServoModel", "GRID_STEP_S"]
 
@@ -64,8 +64,8 @@ class InputSignal:
 
     Parameters
     ----------
-    kind : {"sine", "step", "sweep"}
-        Sine dwell, step, or frequency sweep (chirp).
+    kind : {"sine", "step", "sweep", "recorded"}
+        Sine dwell, step, frequency sweep (chirp), or a recorded input (a pilot's: its samples).
     amplitude : float
         Amplitude in input units.
     frequency_hz : float or None
@@ -77,9 +77,13 @@ class InputSignal:
     shape : {"log", "linear"} or None
         A sweep's frequency law ("log" by default); None for the other kinds.
         See :func:`servoscope.sysid.inputs.sweep_command`.
+    samples : (array_like, array_like) or None
+        A recorded input's ``(time since t0_s, command)``, time strictly increasing and ≥ 0
+        (:func:`servoscope.sysid.inputs.recorded_command`: straight lines between samples, the
+        last value after them); None for the other kinds.
     """
 
-    kind: Literal["sine", "step", "sweep"]
+    kind: Literal["sine", "step", "sweep", "recorded"]
     amplitude: float
     frequency_hz: float | None = None
     t0_s: float = 0.0
@@ -87,10 +91,20 @@ class InputSignal:
     to_hz: float | None = None
     duration_s: float | None = None
     shape: str | None = None
+    samples: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.kind not in ("sine", "step", "sweep"):
-            raise ServoscopeError(f"input kind must be 'sine', 'step' or 'sweep', not {self.kind!r}")
+        if self.kind not in ("sine", "step", "sweep", "recorded"):
+            raise ServoscopeError(f"input kind must be 'sine', 'step', 'sweep' or 'recorded', not {self.kind!r}")
+        if self.kind == "recorded":
+            t, u = (np.array(v, dtype=float) for v in (self.samples or ((), ())))
+            if (t.ndim != 1 or t.shape != u.shape or t.size < 2 or not np.isfinite(t).all()
+                    or not np.isfinite(u).all() or t[0] < 0 or np.any(np.diff(t) <= 0)):
+                raise ServoscopeError("a recorded input needs samples (time, command): finite, of one length >= 2, "
+                                      "time strictly increasing from >= 0")
+            object.__setattr__(self, "samples", (t, u))
+        elif self.samples is not None:
+            raise ServoscopeError(f"only a recorded input has samples, not a {self.kind}")
         if not math.isfinite(self.amplitude) or not math.isfinite(self.t0_s):
             raise ServoscopeError("input amplitude and t0_s must be finite")
         if self.kind == "sine":
@@ -117,7 +131,7 @@ class InputSignal:
 
     @property
     def end_s(self) -> float:
-        """When the input ends: a sweep's ``t0_s + duration_s``; inf for a sine or a step (they hold on)."""
+        """When the input ends: a sweep's ``t0_s + duration_s``; inf for a sine, a step, a recorded input (held)."""
         return self.t0_s + self.duration_s if self.kind == "sweep" else math.inf
 
     def value(self, time_s: np.ndarray | float) -> np.ndarray:
@@ -133,9 +147,12 @@ class InputSignal:
         ndarray
             ``amplitude*sin(2*pi*f*(t - t0))`` (sine), ``amplitude`` (step) for
             ``t >= t0``, 0 before; a sweep's
-            :func:`~servoscope.sysid.inputs.sweep_command` of ``t - t0`` (0 before and after).
+            :func:`~servoscope.sysid.inputs.sweep_command` of ``t - t0`` (0 before and after);
+            a recorded input's :func:`~servoscope.sysid.inputs.recorded_command` of ``t - t0``.
         """
         t = np.asarray(time_s, dtype=float)
+        if self.kind == "recorded":
+            return recorded_command(t - self.t0_s, *self.samples)
         if self.kind == "sweep":
             return sweep_command(t - self.t0_s, self.amplitude, self.from_hz, self.to_hz, self.duration_s, self.shape)
         on = t >= self.t0_s
@@ -315,7 +332,7 @@ class ServoModel:
         if not np.all(np.isfinite(flat)):
             raise ServoscopeError("response: sample times must be finite")
         if (self.input_quantization == 0 and self.rate_limit_per_s is None and self.backlash == 0
-                and signal.kind != "sweep"):
+                and signal.kind not in ("sweep", "recorded")):
             out = self._linear_exact(signal, flat)
         else:
             out = self._nonlinear_grid(signal, flat)

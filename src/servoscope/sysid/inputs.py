@@ -16,7 +16,7 @@ import scipy.signal
 
 from ..errors import ServoscopeError
 
-__all__ = ["SWEEP_SHAPES", "sweep_command", "sweep_problems", "sweep_frequency_hz"]
+__all__ = ["SWEEP_SHAPES", "recorded_command", "sweep_command", "sweep_problems", "sweep_frequency_hz"]
 
 #: The sweep shapes a manifest may name, and scipy.signal.chirp's method for each.
 SWEEP_SHAPES = {"log": "logarithmic", "linear": "linear"}
@@ -104,3 +104,29 @@ def sweep_frequency_hz(t_rel_s, from_hz: float, to_hz: float, duration_s: float,
     if shape == "log":
         return from_hz * (to_hz / from_hz) ** t
     return from_hz + (to_hz - from_hz) * t
+
+
+def recorded_command(t_rel_s, time_s, command) -> np.ndarray:
+    """A recorded input's command at ``t_rel_s`` seconds after the input's start.
+
+    The samples ``(time_s, command)`` (``time_s`` strictly increasing, ≥ 0, seconds after the
+    start) joined by straight lines (:func:`numpy.interp`); 0 before the start, as every
+    other kind (the LED dates the input's first instant), the first sample's value from the
+    start to the first sample, and the last sample's value after the last (a stick left where
+    the pilot let go).
+
+    Parameters
+    ----------
+    t_rel_s : array_like
+        Time since the input's start, seconds.
+    time_s, command : array_like
+        The recording's samples, seconds and input units.
+
+    Returns
+    -------
+    ndarray
+        Same shape as ``t_rel_s``.
+    """
+    t = np.asarray(t_rel_s, dtype=float)
+    v = np.interp(t, np.asarray(time_s, dtype=float), np.asarray(command, dtype=float))
+    return np.where(t >= 0.0, v, 0.0)

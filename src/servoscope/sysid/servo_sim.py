@@ -32,7 +32,7 @@ from __future__ import annotations
 import functools
 import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -41,7 +41,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..errors import ServoscopeError
-from .inputs import sweep_command, sweep_problems
+from .inputs import recorded_command, sweep_command, sweep_problems
 
 __all__ = ["GRID_STEP_S", "LINEAR_PARAMETERS", "NONLINEAR_PARAMETER", "STRUCTURES", "ServoTrace", "simulate_trace"]
 
@@ -89,6 +89,11 @@ class ServoTrace:
         not known. It turns a model's effect into what the picture shows.
     from_hz, to_hz, duration_s, shape
         A sweep's chirp (:func:`~servoscope.sysid.inputs.sweep_command`); None for the other kinds.
+        A recorded input's band, its length and None.
+    input_samples : (ndarray, ndarray) or None
+        A recorded input's samples ``(time since its start, command)``
+        (:func:`~servoscope.sysid.inputs.recorded_command`), the command instead of a chirp; None
+        for the other inputs.
     """
 
     label: str
@@ -106,11 +111,16 @@ class ServoTrace:
     to_hz: float | None = None
     duration_s: float | None = None
     shape: str | None = None
+    input_samples: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(default=None, compare=False,
+                                                                                   repr=False)
 
     def __post_init__(self) -> None:
         if self.kind not in ("sine", "step", "sweep"):
             raise ServoscopeError(f"{self.label}: a trace is a sine, a step or a sweep, not {self.kind!r}")
-        if self.kind == "sweep":
+        if self.input_samples is not None:
+            if self.kind != "sweep" or not (self.from_hz and self.to_hz and 0 < self.from_hz < self.to_hz):
+                raise ServoscopeError(f"{self.label}: a recorded input is a sweep with a band 0 < from_hz < to_hz")
+        elif self.kind == "sweep":
             problems = sweep_problems(self.from_hz, self.to_hz, self.duration_s, self.shape or "log")
             if problems:
                 raise ServoscopeError(f"{self.label}: " + "; ".join(f"{k}: {m}" for k, m in problems))
@@ -142,6 +152,8 @@ class ServoTrace:
     def command(self, time_s: NDArray[np.float64]) -> NDArray[np.float64]:
         """The input at ``time_s`` (0 before the start; a sweep's 0 after it too), input units."""
         dt = time_s - self.t0_s
+        if self.input_samples is not None:
+            return recorded_command(dt, *self.input_samples)
         if self.kind == "sweep":
             return sweep_command(dt, self.amplitude, float(self.from_hz), float(self.to_hz), float(self.duration_s),
                                  self.shape or "log")
