@@ -16,7 +16,7 @@ from ..angle.pivot import heave_px, pivot_motion
 from ..markers.track import marker_names
 from ..markers.track import Track
 from ..sysid import SineFit
-from ..sysid.heave import (HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_REL, HEAVE_SYSTEMATIC_REL_PREDICTED, HeaveModel,
+from ..sysid.heave import (HEAVE_FLOOR_MIN_INTRA_PX, HEAVE_FLOOR_MIN_PX, HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_REL, HEAVE_SYSTEMATIC_REL_PREDICTED, HeaveModel,
                            HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px)
 from ..sysid.heave_traces import HeaveTrace, fit_heave_traces, mode_response_px
 from ..sysid.modes import ModeFit, fit_damped_modes, fit_mode_shapes, pool_modes
@@ -32,8 +32,9 @@ HEAVE_MIN_Z = 5.0
 #: on when the dwell records at least this many of its periods after it; else it is the model's.
 MIN_SETTLED_PERIODS = 4.0
 #: A dwell's heave is fitted to its I-frames alone when its window holds at least this many (and the codec
-#: predicts the others): the pitch's codec check asks as many (:mod:`servoscope.sysid.sine`).
-MIN_IFRAMES = 8
+#: predicts the others): :func:`~servoscope.sysid.heave.dwell_heave` fits nothing to fewer than 10 samples
+#: (with 8, as the pitch's codec check asks, a dwell once got no row at all).
+MIN_IFRAMES = 10
 
 
 def blade_modes(step, track: Track | None, model, pivot, colours: tuple[str, str] = ("", "")) -> list[ModeFit]:
@@ -205,6 +206,48 @@ def _settles_s(mode: ModeFit) -> float:
     return 4.0 / (mode.damping_ratio * 2.0 * math.pi * mode.frequency_hz)
 
 
+def _in_resonance(frequency_hz: float, mode: ModeFit) -> bool:
+    """Whether a dwell's frequency lies within a mode's resonance (3ζ + 2 % of its frequency), as
+    :func:`dwell_modes` and the runner's warning take it."""
+    return abs(frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02
+
+
+def _floor_px(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
+                    modes: list[ModeFit], model: HeaveModel, intra: bool) -> float | None:
+    """The heave's systematic floor, as this footage shows it; None when it cannot.
+
+    A codec that predicts frames holds each sticker's motion across the line back by an amount that
+    depends on the bit rate and the picture (rigid blades on the twin: 0.03–0.07 px at 20 Mbit/s, up
+    to 0.1 px at 4 Mbit/s, issue 32); frames coded alone leave 0.001–0.003 px with disc stickers and
+    more with strips seen through a lens. One constant is either too wide for a good camera or too
+    narrow for a poor one. The whole traces' model predicts each dwell's heave; the dwells away from
+    the modes' resonances, measured with no floor, scatter about it by their fit's errors and the
+    footage's: the floor is the RMS of that scatter (their amplitudes', px) less the fit's, over the
+    degrees of freedom the model leaves (dwells less its parameters), and at least
+    :data:`~servoscope.sysid.heave.HEAVE_FLOOR_MIN_INTRA_PX` (frames coded alone, ``intra``) or
+    :data:`~servoscope.sysid.heave.HEAVE_FLOOR_MIN_PX`: an estimate from a few dwells can fall well
+    short. None with fewer than 3 degrees of freedom: then the constants
+    (:func:`~servoscope.sysid.heave.heave_systematic_px`) stand.
+    """
+    bare = heave_response(campaign, tracks, fits, pivot, modes, axis=model, predicted_floor_px=0.0)
+    excess = []
+    for row in bare:
+        test = next(t for t in campaign.sine_tests if t.label == row.label)
+        pitch = _pitch_of(fits[row.label], test.amplitude)
+        if pitch is None or any(_in_resonance(row.frequency_hz, m) for m in model.modes):
+            continue
+        a = abs(test.amplitude)
+        # Amplitudes, not complex values: the floor is an amplitude's (its phase's is the floor over the
+        # amplitude), and the codec's small relative phase lag of a large heave is not a floor in px.
+        predicted = abs(complex(model.ratio(np.array([row.frequency_hz]))[0])) * pitch[0] * a
+        # Less the row's own error (its floor 0 here, but its 0.3 % of the amplitude).
+        excess.append((row.gain * a - predicted) ** 2 - (row.gain_stderr * a) ** 2)
+    dof = len(excess) - 3 * len(model.modes) - 1
+    if dof < 3:
+        return None
+    return max(math.sqrt(max(sum(excess) / dof, 0.0)), HEAVE_FLOOR_MIN_INTRA_PX if intra else HEAVE_FLOOR_MIN_PX)
+
+
 def _pitch_of(fit: SineFit, amplitude: float) -> tuple[float, float, float, float] | None:
     """A dwell's pitch per input unit: (gain, its error, phase rad, its error); None without a phase."""
     if fit.phase_rad is None or not amplitude:
@@ -243,6 +286,11 @@ def _unsettled(test, track: Track, t0: float, fit: SineFit, row: HeaveRow, model
     pitch = _pitch_of(fit, test.amplitude)
     if not waiting or pitch is None:
         return None
+    near = [m for m in waiting if _in_resonance(test.frequency_hz, m)]
+    if near:
+        # Within the mode's resonance its free and forced motions are one in a window this short,
+        # whatever the row's error says (the ring-down's columns are the sine's).
+        return max(near, key=_settles_s)
     # The model's heave over this dwell, noise-free, driven by the pitch measured each frame.
     sim = sum(kappa * mode_response_px(track.angle_time_s, pitch_rad, m.frequency_hz, m.damping_ratio)
               for kappa, m in zip(model.gains_px_per_rad, model.modes))
@@ -309,6 +357,10 @@ def _flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Sine
     model = whole if whole is not None and whole.modes else heave_model(campaign, rows, fits, modes)
     if not rows or model is None or model.method != "whole traces":
         return rows, model
+    floor = _floor_px(campaign, tracks, fits, pivot, modes, model, intra)
+    if floor is not None:
+        rows = heave_response(campaign, tracks, fits, pivot, modes, axis=whole, predicted_floor_px=floor)
+        model = replace(model, floor_px=floor)
     out = []
     by_label = {tr.label: tr for tr in traces}
     for row in rows:
@@ -326,7 +378,7 @@ def _flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Sine
         # when the dwell records enough of that (MIN_SETTLED_PERIODS of its sine), else the model's.
         settled = (trace.start_s + _settles_s(mode), fit.window_s[1])
         if (settled[1] - settled[0]) * test.frequency_hz >= MIN_SETTLED_PERIODS:
-            late = _measured_row(test, track, fit, trace.start_s, trace.heave_px, modes, model, settled)
+            late = _measured_row(test, track, fit, trace.start_s, trace.heave_px, modes, model, settled, floor)
             if late is not None and _unsettled(test, track, trace.start_s, fit, late, model, pitch, _mode_of(modes),
                                                settled) is None:
                 out.append(late)
@@ -338,20 +390,27 @@ def _flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Sine
             f"and the dwell ends {fit.window_s[1] - trace.start_s:.2g} s after it: the heave stated there is the flapping "
             f"model's steady state, fitted to the whole traces, not a measurement; record at least {need:.2g} s of this "
             f"dwell after the input's start to measure it")
-        model_row = _model_row(test, fit, model, heave_systematic_px(track.intra))
+        systematic = heave_systematic_px(track.intra)
+        model_row = _model_row(test, fit, model, floor if floor is not None else systematic)
         out.append(model_row if model_row is not None else row)
     return out, model
 
 
 def _measured_row(test, track: Track, fit: SineFit, t0: float, heave: np.ndarray, modes: list[ModeFit] | None,
-                  axis: HeaveModel | None, window_s: tuple[float, float]) -> HeaveRow | None:
-    """A dwell's heave sine over ``window_s`` (:func:`~servoscope.sysid.heave.dwell_heave`), the axis term taken off first."""
+                  axis: HeaveModel | None, window_s: tuple[float, float],
+                  predicted_floor_px: float | None = None) -> HeaveRow | None:
+    """A dwell's heave sine over ``window_s`` (:func:`~servoscope.sysid.heave.dwell_heave`), the axis term taken off first.
+
+    ``predicted_floor_px``: the systematic floor where the codec predicts frames, when the footage
+    told it (:func:`_floor_px`); else :func:`~servoscope.sysid.heave.heave_systematic_px`'s."""
     e = 0.0 if axis is None else axis.axis_px_per_rad
     se_e = 0.0 if axis is None or not math.isfinite(axis.axis_stderr_px_per_rad) else axis.axis_stderr_px_per_rad
     if e:
         trace = HeaveTrace(test.label, track.angle_time_s, np.where(track.valid, track.angle_rad, np.nan), heave, t0)
         heave = heave - e * trace.pitch_from_rest()
     systematic = heave_systematic_px(track.intra)
+    if predicted_floor_px is not None:
+        systematic = predicted_floor_px  # the footage's own (the I-frames' below keep theirs)
     intra = None if track.intra is None else np.asarray(track.intra, dtype=bool)
     if intra is not None and intra.shape == heave.shape and not np.all(intra):
         t = np.asarray(track.angle_time_s, float)
@@ -372,7 +431,8 @@ def _measured_row(test, track: Track, fit: SineFit, t0: float, heave: np.ndarray
 
 
 def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
-                   modes: list[ModeFit] | None = None, axis: HeaveModel | None = None) -> list[HeaveRow]:
+                   modes: list[ModeFit] | None = None, axis: HeaveModel | None = None,
+                   predicted_floor_px: float | None = None) -> list[HeaveRow]:
     """Each fitted dwell's heave at its input frequency; empty unless one of them is measured.
 
     ``modes``: the blade's modes found (the step's first): their ring-downs are fitted
@@ -387,12 +447,13 @@ def heave_response(campaign: Campaign, tracks: dict[str, Track], fits: dict[str,
     ``axis``: the whole traces' model (:func:`~servoscope.sysid.heave_traces.fit_heave_traces`),
     whose axis term (heave in phase with the pitch, px/rad) is taken off each dwell's heave
     before its sine is fitted; the term's error times the dwell's pitch amplitude is added to the row's.
+    ``predicted_floor_px``: the floor where the codec predicts frames, as the footage told it.
     """
     if pivot is None:
         return []
     rows = []
     for test, track, fit, t0, h in _dwell_heaves(campaign, tracks, fits, pivot):
-        row = _measured_row(test, track, fit, t0, h, modes, axis, fit.window_s)
+        row = _measured_row(test, track, fit, t0, h, modes, axis, fit.window_s, predicted_floor_px)
         if row is not None:
             rows.append(row)
     if not any(r.gain >= HEAVE_MIN_Z * r.gain_stderr for r in rows):

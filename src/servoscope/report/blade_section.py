@@ -3,12 +3,14 @@ its heave and bending per dwell, and the flapping model fitted to the heave's wh
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..camera.plane_map import recorded_points
 from ..numbers import format_interval, format_value, format_with_uncertainty
+from ..sysid.heave import HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_INTRA_PX, HEAVE_SYSTEMATIC_PX
 from ..sysid.modes import MODE_SOURCES
 from .figures import blade_frame_figure, heave_figure
 from .html import ReportSection
@@ -50,43 +52,7 @@ def blade_section(result: "IdentificationResult", figures_dir) -> ReportSection:
                      "exaggerated (arrows; the dashed line joins the displaced markers).", "Blade motions frame",
                      name="blade_frame")
     if result.heave_response:
-        # The blade's heave at each dwell's frequency: a second frequency response, beside the pitch's.
-        s.table(["dwell", "f (Hz)", "heave gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
-                 "amplitude (px)", "from"],
-                [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
-                  *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3),
-                  "measured" if r.source == "measured" else "the model (window not settled)"]
-                 for r in result.heave_response])
-        hm = result.heave_model
-        curve = None
-        if hm is not None:
-            terms = "; ".join(
-                f"κ = {' ± '.join(format_with_uncertainty(k, kse))} px/rad, "
-                + (f"fm = {m.frequency_hz:.4g} Hz and ζ = {m.damping_ratio:.3g} held at the step's" if m.source == "held"
-                   else f"fm = {m.frequency_hz:.4g} ± {m.frequency_stderr_hz:.2g} Hz, ζ = {m.damping_ratio:.3g} ± "
-                        f"{m.damping_ratio_stderr:.2g}")
-                for k, kse, m in zip(hm.gains_px_per_rad, hm.gain_stderrs_px_per_rad, hm.modes))
-            how = (f"to every test's heave frame by frame, each mode driven by the pitch measured in it, from the "
-                   f"test's start ({hm.n_dwells} dwells and the other tests; reduced χ² {hm.chi2_reduced:.3g}); "
-                   f"beside the modes, heave in phase with the pitch at every frequency, "
-                   f"{' ± '.join(format_with_uncertainty(hm.axis_px_per_rad, hm.axis_stderr_px_per_rad))} px/rad "
-                   f"(the pitch axis found that far off along the chord), taken off each dwell's heave above"
-                   if hm.method == "whole traces" else
-                   f"over {hm.n_dwells} dwells' heave over their pitch (reduced χ² {hm.chi2_reduced:.3g})")
-            s.text(f"Fitted as {'a mode' if len(hm.modes) == 1 else f'{len(hm.modes)} modes'} thrown by the pitch's "
-                   f"acceleration, heave/pitch = Σ κ·ω²/(ωm² − ω² + 2jζωm·ω): {terms}; {how}.")
-            f = np.geomspace(min(r.frequency_hz for r in result.heave_response) / 1.5,
-                             max(r.frequency_hz for r in result.heave_response) * 1.5, 400)
-            w = 2 * np.pi * f
-            pitch = result.model.transfer_function(1j * w) * np.exp(-1j * w * (result.dead_time_s or 0.0))
-            z = hm.ratio(f) * np.asarray(pitch).reshape(-1)
-            phase = np.degrees(np.angle(z))  # wrapped, as the measured phases are: broken where it wraps
-            phase[1:][np.abs(np.diff(phase)) > 180.0] = np.nan
-            curve = (f, np.abs(z), phase)
-        s.figure(heave_figure(result.heave_response, result.modes, curve), "The blade's heave (the lead–trail "
-                 "line's distance from the pitch axis) at each dwell's frequency, against the input: a blade that "
-                 "flaps answers most near its mode. Error bars: ±1 standard error, a systematic floor included (0.005 px on footage of frames coded on their own, 0.05 px where the codec predicts frames, and 0.3 % of the amplitude).",
-                 "Heave against frequency", name="heave")
+        _add_heave(s, result)
     if result.bending_response:
         s.table(["marker", "dwell", "f (Hz)", "bending gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
                  "amplitude (px)"],
@@ -101,6 +67,48 @@ def blade_section(result: "IdentificationResult", figures_dir) -> ReportSection:
                  "(its distance across the lead–trail line) at each dwell's frequency, against the input. Error bars: "
                  "±1 standard error, the systematic floor included.", "Bending against frequency", name="bending")
     return s
+
+
+def _add_heave(s: ReportSection, result: "IdentificationResult") -> None:
+    """The heave per dwell's table, the flapping model in words and the heave's figure."""
+    # The blade's heave at each dwell's frequency: a second frequency response, beside the pitch's.
+    s.table(["dwell", "f (Hz)", "heave gain (px per input unit)", "± s.e.", "phase (deg)", "± s.e.",
+             "amplitude (px)", "from"],
+            [[r.label, format_value(r.frequency_hz, 4), *format_with_uncertainty(r.gain, r.gain_stderr),
+              *format_with_uncertainty(r.phase_deg, r.phase_stderr_deg), format_value(r.amplitude_px, 3),
+              "measured" if r.source == "measured" else "the model (window not settled)"]
+             for r in result.heave_response])
+    hm = result.heave_model
+    curve = None
+    if hm is not None:
+        terms = "; ".join(
+            f"κ = {' ± '.join(format_with_uncertainty(k, kse))} px/rad, "
+            + (f"fm = {m.frequency_hz:.4g} Hz and ζ = {m.damping_ratio:.3g} held at the step's" if m.source == "held"
+               else f"fm = {' ± '.join(format_with_uncertainty(m.frequency_hz, m.frequency_stderr_hz))} Hz, "
+                    f"ζ = {' ± '.join(format_with_uncertainty(m.damping_ratio, m.damping_ratio_stderr))}")
+            for k, kse, m in zip(hm.gains_px_per_rad, hm.gain_stderrs_px_per_rad, hm.modes))
+        how = (f"to every test's heave frame by frame, each mode driven by the pitch measured in it, from the "
+               f"test's start ({hm.n_dwells} dwells and the other tests; reduced χ² {hm.chi2_reduced:.3g}); "
+               f"beside the modes, heave in phase with the pitch at every frequency, "
+               f"{' ± '.join(format_with_uncertainty(hm.axis_px_per_rad, hm.axis_stderr_px_per_rad))} px/rad "
+               f"(the pitch axis found that far off along the chord), taken off each dwell's heave above"
+               if hm.method == "whole traces" else
+               f"over {hm.n_dwells} dwells' heave over their pitch (reduced χ² {hm.chi2_reduced:.3g})")
+        s.text(f"Fitted as {'a mode' if len(hm.modes) == 1 else f'{len(hm.modes)} modes'} thrown by the pitch's "
+               f"acceleration, heave/pitch = Σ κ·ω²/(ωm² − ω² + 2jζωm·ω): {terms}; {how}.")
+        f = np.geomspace(min(r.frequency_hz for r in result.heave_response) / 1.5,
+                         max(r.frequency_hz for r in result.heave_response) * 1.5, 400)
+        w = 2 * np.pi * f
+        pitch = result.model.transfer_function(1j * w) * np.exp(-1j * w * (result.dead_time_s or 0.0))
+        z = hm.ratio(f) * np.asarray(pitch).reshape(-1)
+        phase = np.degrees(np.angle(z))  # wrapped, as the measured phases are: broken where it wraps
+        phase[1:][np.abs(np.diff(phase)) > 180.0] = np.nan
+        curve = (f, np.abs(z), phase)
+    s.figure(heave_figure(result.heave_response, result.modes, curve), "The blade's heave (the lead–trail "
+             "line's distance from the pitch axis) at each dwell's frequency, against the input: a blade that "
+             "flaps answers most near its mode. Error bars: ±1 standard error, a systematic floor included: "
+             + _floor_text(result.heave_model) + ", and 0.3 % of the amplitude.",
+             "Heave against frequency", name="heave")
 
 
 def _blade_frame(result: "IdentificationResult", modes):
@@ -125,3 +133,13 @@ def _blade_frame(result: "IdentificationResult", modes):
     return blade_frame_figure(track.snapshot_rgb, pts, list(modes[0].shape.markers), None,
                               title=f"{label}, frame {i}: every marker and the {which} mode shapes (exaggerated)",
                               more=drawn)
+
+
+def _floor_text(model) -> str:
+    """The heave rows' systematic floor, in words: the one the footage showed where it did."""
+    if model is not None and math.isfinite(getattr(model, "floor_px", math.nan)):
+        return (f"{model.floor_px:.2g} px (what the dwells' scatter about the flapping model shows; "
+                f"{HEAVE_SYSTEMATIC_IFRAME_PX:g} px where a dwell's heave is fitted to its I-frames)")
+    return (f"{HEAVE_SYSTEMATIC_INTRA_PX:g} px on footage of frames coded on their own, {HEAVE_SYSTEMATIC_PX:g} px "
+            f"where the codec predicts frames, {HEAVE_SYSTEMATIC_IFRAME_PX:g} px where a dwell's heave is fitted to "
+            f"its I-frames")

@@ -19,7 +19,8 @@ from ..results import jsonable
 from .hac import hac_covariance
 from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit, ringdown_columns
 
-__all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_SYSTEMATIC_IFRAME_PX", "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX",
+__all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_FLOOR_MIN_INTRA_PX", "HEAVE_FLOOR_MIN_PX", "HEAVE_SYSTEMATIC_IFRAME_PX",
+           "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX",
            "HEAVE_SYSTEMATIC_REL", "HEAVE_SYSTEMATIC_REL_PREDICTED", "HeaveModel", "HeaveRow",
            "dwell_heave", "fit_heave_model", "heave_systematic_px"]
 
@@ -34,6 +35,13 @@ HEAVE_SYSTEMATIC_PX = 0.1
 #: The same where a dwell's heave is fitted to its I-frames alone (a camcorder's GOP, 8 or more in the
 #: window): H.264 with an I-frame every 12 read ≤ 0.007 px on rigid blades (issue 32).
 HEAVE_SYSTEMATIC_IFRAME_PX = 0.01
+#: The least floor the footage's own (the dwells' scatter about the flapping model fitted to the whole
+#: traces, :func:`servoscope.campaign.blade.flapping`) may state, where the codec predicts frames: the
+#: I-frames' (an estimate from a few dwells can fall well short of the codec's bias).
+HEAVE_FLOOR_MIN_PX = HEAVE_SYSTEMATIC_IFRAME_PX
+#: The same on frames coded alone: what rigid blades with disc stickers read at worst on raw twin footage
+#: (0.0009–0.0029 px).
+HEAVE_FLOOR_MIN_INTRA_PX = 0.003
 #: κ's relative systematic on footage whose codec predicts frames: the flapping's heave held back or
 #: carried on by the codec alike at every dwell (twin, issue 32: 9.3 Hz mode at 800×600 H.264, κ 0.8 % low).
 HEAVE_SYSTEMATIC_REL_PREDICTED = 0.015
@@ -181,6 +189,10 @@ class HeaveModel(FitResult):
     covariance : tuple of tuple of float, or None
         Covariance of (κ, frequency, damping ratio) of each mode in turn (the whole traces' fit):
         the per-dwell heave made from the model carries it (:meth:`ratio_stderr`).
+    floor_px : float
+        The per-dwell heave's systematic floor as the dwells' scatter about this model showed it
+        (:func:`servoscope.campaign.blade.flapping`); NaN where it was not measured (fewer than 3
+        degrees of freedom among the dwells away from the modes: the constants stand).
     """
 
     gains_px_per_rad: tuple[float, ...]
@@ -192,6 +204,7 @@ class HeaveModel(FitResult):
     axis_px_per_rad: float = 0.0
     axis_stderr_px_per_rad: float = math.nan
     covariance: tuple[tuple[float, ...], ...] | None = None
+    floor_px: float = math.nan
 
     model_name = "heave/pitch = Σ κ·ω²/(ωm² − ω² + 2j·ζ·ωm·ω) (the blade's flapping modes)"
 
@@ -273,7 +286,8 @@ class HeaveModel(FitResult):
                          "chi2_reduced": self.chi2_reduced, "n_dwells": self.n_dwells, "method": self.method,
                          **({"axis_px_per_rad": self.axis_px_per_rad,
                              "axis_stderr_px_per_rad": self.axis_stderr_px_per_rad,
-                             "covariance": [list(r) for r in self.covariance or ()]}
+                             "covariance": [list(r) for r in self.covariance or ()],
+                             "floor_px": self.floor_px}
                             if self.method == "whole traces" else {})})
 
     @classmethod
@@ -292,7 +306,8 @@ class HeaveModel(FitResult):
         return cls(tuple(t["gain_px_per_rad"] for t in terms), tuple(t["gain_stderr_px_per_rad"] for t in terms), modes,
                    nan_if_none(d["chi2_reduced"]), d["n_dwells"], method, d.get("axis_px_per_rad", 0.0),
                    nan_if_none(d.get("axis_stderr_px_per_rad")),
-                   None if not cov else tuple(tuple(float(nan_if_none(v)) for v in row) for row in cov))
+                   None if not cov else tuple(tuple(float(nan_if_none(v)) for v in row) for row in cov),
+                   nan_if_none(d.get("floor_px")))
 
 
 def _mode_term(w: np.ndarray, kappa: float, frequency_hz: float, damping_ratio: float) -> np.ndarray:
