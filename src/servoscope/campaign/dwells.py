@@ -14,7 +14,7 @@ from ..sysid import FrequencyResponse, SineFit, fit_sine, gain_against_amplitude
 from .manifest import Campaign, TestSpec
 from .result import input_start, input_start_stderr
 
-__all__ = ["amplitude_checks", "dwell_response", "exposure_corrected", "fit_dwell", "fit_dwells", "fit_mode"]
+__all__ = ["amplitude_checks", "dwell_response", "exposure_corrected", "exposure_undone", "fit_dwell", "fit_dwells", "fit_mode"]
 
 
 def fit_dwell(campaign: Campaign, test: TestSpec, track: Track, own_t0_stderr: dict[str, float],
@@ -77,16 +77,24 @@ def dwell_response(campaign: Campaign, fits: dict[str, SineFit], amplitudes: lis
                                                                          list(fits)), exposure)
 
 
-def exposure_corrected(campaign: Campaign, fr: FrequencyResponse, exposure: ExposureEstimate) -> FrequencyResponse:
-    """`fr` corrected for the exposure given or seen in the blur (the dwells' and the sweeps' alike)."""
+def exposure_undone(campaign: Campaign, exposure: ExposureEstimate | None) -> tuple[float, float]:
+    """The exposure whose averaging the frequency response undoes, and its standard error (s): the one given,
+    else the one seen in the blur, else none (0, 0)."""
     if campaign.exposure_s is not None:
-        return fr.corrected_for_exposure(campaign.exposure_s)
-    if exposure.known and "blur" in exposure.source:
+        return float(campaign.exposure_s), 0.0
+    if exposure is not None and exposure.known and "blur" in exposure.source:
         # Seen in the blur: a long shutter (a full frame at 100 frames/s takes 3.7 % off a 12 Hz
         # dwell), corrected with its uncertainty. Not the LED's estimate alone: the LED
         # says most when the shutter is short, where the correction is a few per mille.
-        return fr.corrected_for_exposure(exposure.value_s, exposure.stderr_s)
-    return fr
+        return float(exposure.value_s), float(exposure.stderr_s)
+    return 0.0, 0.0
+
+
+def exposure_corrected(campaign: Campaign, fr: FrequencyResponse, exposure: ExposureEstimate) -> FrequencyResponse:
+    """`fr` corrected for the exposure given or seen in the blur (the dwells' and the sweeps' alike,
+    :func:`exposure_undone`)."""
+    e, se = exposure_undone(campaign, exposure)
+    return fr.corrected_for_exposure(e, se) if e > 0 else fr
 
 
 def fit_mode(fit: str, fr: FrequencyResponse, campaign: Campaign) -> str:
