@@ -87,3 +87,30 @@ def test_the_report_draws_the_sweep_as_the_fit_takes_it(sweep_campaign):
     top = max(taken)
     assert drawn[top] / sweep.gain[np.argmin(abs(sweep.frequency_hz - top))] == pytest.approx(
         1 / np.sinc(top * result.campaign.exposure_s), rel=1e-9)
+
+
+def test_a_codec_that_lags_the_stickers_widens_the_dead_time_and_says_so(sweep_campaign, tmp_path):
+    """H.264 at 1000 frames/s and 10 kbit a frame shows the stickers late in its predicted frames; a sweep has
+    no codec check, so the lag behind the I-frames is measured and added to the dead time's error (issue 31)."""
+    from servoscope.campaign.sweeps import codec_lag_s
+
+    toml = simulate_campaign(tmp_path / "c", "quick", 3, width=320, height=256, fps=1000, exposure_s=0.0005,
+                             codec="h264", bit_rate=10_000_000, frequencies_hz=(), include_step=False,
+                             sweep=(1.0, 15.0, 3.0), pre_roll_s=0.5, settle_s=0.5)
+    result = identify(toml, workers=1)
+    (track,) = result.tracks.values()
+    lag, lag_se = codec_lag_s(track)
+    # Oracle: the lag at which the rendered angle best matches the tracked one.
+    truth = json.loads((tmp_path / "c" / "truth.json").read_text())["tests"][0]
+    y = np.where(track.valid, track.angle_rad, np.nan)
+    ok = np.isfinite(y)
+    shifts = np.linspace(-3e-3, 3e-3, 121)
+    seen = shifts[int(np.argmin([np.std((y - np.interp(track.angle_time_s - s, truth["time_s"], truth["angle_rad"]))[ok])
+                                 for s in shifts]))]
+    assert seen > 0.5e-3 and abs(lag - seen) < 0.5e-3 and lag > 3 * lag_se, (lag, lag_se, seen)
+    assert any("later than its I-frames" in w for w in result.warnings), result.warnings
+    p = result.parameters["dead_time_s"]
+    assert p.holds(TRUTH["dead_time_s"]) and p.stderr >= lag
+    # Raw footage: every frame is an I-frame, nothing to tell and nothing added.
+    (raw,) = [t for label, t in identify(sweep_campaign, workers=1).tracks.items() if label.startswith("sweep")]
+    assert codec_lag_s(raw) is None

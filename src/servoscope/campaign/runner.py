@@ -463,7 +463,7 @@ def identify(
     _add_tracking_warnings(campaign, tracks, warnings)
 
     sweeps = sweep_responses(campaign, tracks, warnings)
-    shared_t0_s = max(shared_t0_s, sweeps_t0_stderr(campaign, tracks, sweeps))
+    shared_t0_s = max(shared_t0_s, sweeps_t0_stderr(campaign, tracks, sweeps, warnings))
     fits, amplitudes = fit_dwells(campaign, tracks, own_t0_stderr, order, warnings,
                                   sum(int(np.count_nonzero(s.kept)) for s in sweeps.values()))
     dwells = dwell_response(campaign, fits, amplitudes, exposure) if fits else None
