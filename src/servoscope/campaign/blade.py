@@ -16,15 +16,16 @@ from ..angle.pivot import heave_px, pivot_motion
 from ..markers.track import marker_names
 from ..markers.track import Track
 from ..sysid import SineFit
-from ..sysid.heave import (HEAVE_FLOOR_MIN_INTRA_PX, HEAVE_FLOOR_MIN_PX, HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_REL, HEAVE_SYSTEMATIC_REL_PREDICTED, HeaveModel,
-                           HeaveRow, dwell_heave, fit_heave_model, heave_systematic_px)
+from ..sysid.heave import (HEAVE_FLOOR_MIN_INTRA_PX, HEAVE_FLOOR_MIN_PX, HEAVE_SYSTEMATIC_IFRAME_PX, HEAVE_SYSTEMATIC_REL,
+                           HEAVE_SYSTEMATIC_REL_PREDICTED, HeaveModel, HeaveRow, coded_alone, dwell_heave,
+                           fit_heave_model, heave_systematic_px)
 from ..sysid.heave_traces import HeaveTrace, fit_heave_traces, mode_response_px
 from ..sysid.modes import ModeFit, fit_damped_modes, fit_mode_shapes, pool_modes
 from .manifest import Campaign
 from .result import input_start
 
-__all__ = ["HEAVE_MIN_Z", "MIN_IFRAMES", "MIN_RINGDOWN_PERIODS", "MIN_SETTLED_PERIODS", "axis_of", "bending_response", "blade_modes", "dwell_modes",
-           "flapping", "heave_model", "heave_response", "heave_traces", "step_ringdown_warning"]
+__all__ = ["HEAVE_MIN_Z", "MIN_IFRAMES", "MIN_RINGDOWN_PERIODS", "MIN_SETTLED_PERIODS", "axis_of", "bending_response",
+           "blade_modes", "dwell_modes", "flapping", "heave_model", "heave_response", "heave_traces", "step_ringdown_warning"]
 
 #: A dwell's heave at its frequency counts as measured when its amplitude is this many standard errors.
 HEAVE_MIN_Z = 5.0
@@ -159,7 +160,7 @@ def dwell_modes(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Si
         for mode in fit_damped_modes(track.angle_time_s, heave, t0 + settle, noise=_noise_before(track, heave, t0),
                                      source="dwells", forced_hz=test.frequency_hz,
                                      max_modes=max(1, len(known or []))):
-            if abs(test.frequency_hz / mode.frequency_hz - 1.0) >= 3.0 * mode.damping_ratio + 0.02:
+            if not mode.resonates_at(test.frequency_hz):
                 found.append(mode)
     groups: list[list[ModeFit]] = []
     if known:
@@ -206,14 +207,8 @@ def _settles_s(mode: ModeFit) -> float:
     return 4.0 / (mode.damping_ratio * 2.0 * math.pi * mode.frequency_hz)
 
 
-def _in_resonance(frequency_hz: float, mode: ModeFit) -> bool:
-    """Whether a dwell's frequency lies within a mode's resonance (3ζ + 2 % of its frequency), as
-    :func:`dwell_modes` and the runner's warning take it."""
-    return abs(frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02
-
-
 def _floor_px(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, SineFit], pivot,
-                    modes: list[ModeFit], model: HeaveModel, intra: bool) -> float | None:
+              modes: list[ModeFit], model: HeaveModel, intra: bool) -> float | None:
     """The heave's systematic floor, as this footage shows it; None when it cannot.
 
     A codec that predicts frames holds each sticker's motion across the line back by an amount that
@@ -234,7 +229,7 @@ def _floor_px(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Sine
     for row in bare:
         test = next(t for t in campaign.sine_tests if t.label == row.label)
         pitch = _pitch_of(fits[row.label], test.amplitude)
-        if pitch is None or any(_in_resonance(row.frequency_hz, m) for m in model.modes):
+        if pitch is None or any(m.resonates_at(row.frequency_hz) for m in model.modes):
             continue
         a = abs(test.amplitude)
         # Amplitudes, not complex values: the floor is an amplitude's (its phase's is the floor over the
@@ -286,7 +281,7 @@ def _unsettled(test, track: Track, t0: float, fit: SineFit, row: HeaveRow, model
     pitch = _pitch_of(fit, test.amplitude)
     if not waiting or pitch is None:
         return None
-    near = [m for m in waiting if _in_resonance(test.frequency_hz, m)]
+    near = [m for m in waiting if m.resonates_at(test.frequency_hz)]
     if near:
         # Within the mode's resonance its free and forced motions are one in a window this short,
         # whatever the row's error says (the ring-down's columns are the sine's).
@@ -350,7 +345,7 @@ def _flapping(campaign: Campaign, tracks: dict[str, Track], fits: dict[str, Sine
     if not start:
         ratios = heave_model(campaign, heave_response(campaign, tracks, fits, pivot, modes), fits, modes)
         start = [] if ratios is None else [(m.frequency_hz, m.damping_ratio) for m in ratios.modes]
-    intra = all(tr.intra is not None and len(tr.intra) and bool(np.all(tr.intra)) for tr in tracks.values())
+    intra = all(coded_alone(tr.intra) for tr in tracks.values())
     whole = fit_heave_traces(traces, start, n_dwells=n_dwells,
                              gain_systematic_rel=HEAVE_SYSTEMATIC_REL if intra else HEAVE_SYSTEMATIC_REL_PREDICTED)
     rows = heave_response(campaign, tracks, fits, pivot, modes, axis=whole)

@@ -357,8 +357,7 @@ def mode_warnings(campaign: Campaign, modes) -> list[str]:
         if any(abs(mode.frequency_hz / f - 1.0) < 0.02 for f in warned):
             continue  # the same mode seen in the step and the dwells: one warning
         warned.append(mode.frequency_hz)
-        near = [t.label for t in campaign.sine_tests if t.frequency_hz
-                and abs(t.frequency_hz / mode.frequency_hz - 1.0) < 3.0 * mode.damping_ratio + 0.02]
+        near = [t.label for t in campaign.sine_tests if t.frequency_hz and mode.resonates_at(t.frequency_hz)]
         if near:
             out.append(f"the blade's mode at {mode.frequency_hz:.3g} Hz (damping {mode.damping_ratio:.3f}) is "
                        f"within its resonance of the dwell(s) {', '.join(near)}: the blade's own motion adds "

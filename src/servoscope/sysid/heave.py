@@ -22,7 +22,7 @@ from .modes import MAX_MODE_DAMPING, MODE_SYSTEMATIC, ModeFit, ringdown_columns
 __all__ = ["BENDING_SYSTEMATIC_PX", "HEAVE_FLOOR_MIN_INTRA_PX", "HEAVE_FLOOR_MIN_PX", "HEAVE_SYSTEMATIC_IFRAME_PX",
            "HEAVE_SYSTEMATIC_INTRA_PX", "HEAVE_SYSTEMATIC_PX",
            "HEAVE_SYSTEMATIC_REL", "HEAVE_SYSTEMATIC_REL_PREDICTED", "HeaveModel", "HeaveRow",
-           "dwell_heave", "fit_heave_model", "heave_systematic_px"]
+           "coded_alone", "dwell_heave", "fit_heave_model", "heave_systematic_px"]
 
 #: Systematic uncertainty of a dwell's heave amplitude, px, added to the fit's, on footage whose
 #: codec predicts frames from others (H.264, MPEG-2): the codec holds each sticker's motion across
@@ -59,11 +59,16 @@ HEAVE_SYSTEMATIC_REL = 0.003
 BENDING_SYSTEMATIC_PX = 0.1
 
 
+def coded_alone(intra: np.ndarray | None) -> bool:
+    """Whether a track's every frame was coded on its own (``Track.intra`` all true; unknown counts as predicted)."""
+    return intra is not None and len(intra) > 0 and bool(np.all(intra))
+
+
 def heave_systematic_px(intra: np.ndarray | None, *, bending: bool = False) -> float:
     """The heave's (or a marker's bending's) systematic floor for a track: :data:`HEAVE_SYSTEMATIC_INTRA_PX` when
     every frame was coded on its own (``Track.intra`` all true), else :data:`HEAVE_SYSTEMATIC_PX`
     (:data:`BENDING_SYSTEMATIC_PX` for bending; unknown counts as predicted)."""
-    if intra is not None and len(intra) and bool(np.all(intra)):
+    if coded_alone(intra):
         return HEAVE_SYSTEMATIC_INTRA_PX
     return BENDING_SYSTEMATIC_PX if bending else HEAVE_SYSTEMATIC_PX
 

@@ -80,6 +80,12 @@ class ModeFit(FitResult):
     def model_name(self) -> str:  # type: ignore[override]
         return f"damped mode A·exp(−ζ·2πf·t)·cos(2πf·√(1−ζ²)·t + φ) + c ({self.source})"
 
+    def resonates_at(self, frequency_hz: float) -> bool:
+        """Whether ``frequency_hz`` lies within this mode's resonance: within 3ζ + 2 % of its frequency, where a
+        dwell's forced motion and the mode's own are one (the dwells' ring-downs leave it out, the runner warns,
+        the heave there is measured from the settling or is the model's)."""
+        return abs(frequency_hz / self.frequency_hz - 1.0) < 3.0 * self.damping_ratio + 0.02
+
     @property
     def parameters(self) -> Parameters:
         """``frequency_hz`` (Hz) and ``damping_ratio``, their 95 % intervals log-normal (never below zero).
