@@ -16,7 +16,7 @@ every chroma sample once for all markers (lead, trail, LED, ...):
   so the results equal the CPU's bit for bit (:func:`class_moments_cpu`),
   on any GPU and in any launch configuration.
 
-Blocks run over (frame, strip of chroma rows), ``THREADS`` threads across a
+Blocks run over (frames, strip of chroma rows), ``THREADS`` threads across a
 row, so that a warp reads consecutive bytes.
 
 Needs numba's CUDA support and a CUDA GPU, or numba's simulator
@@ -28,6 +28,7 @@ brings ``numba.cuda``; a GPU needs only the NVIDIA driver and CUDA runtime.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import math
 import os
@@ -40,15 +41,24 @@ from numba import cuda, int64, uint32
 from . import kernels as K
 
 __all__ = ["cuda_available", "require_cuda", "class_tables", "chroma_windows", "class_moments_cpu", "moments_from_sums",
-           "GpuClassifier", "measure_rates", "bench_params", "THREADS", "ROWS_PER_BLOCK", "MAX_MARKERS",
+           "GpuClassifier", "measure_rates", "bench_params", "THREADS", "ROWS_PER_BLOCK", "FRAME_BLOCKS",
+           "MAX_MARKERS", "class_sums_kernel",
            "NVVM_WHEEL"]
 
-#: Threads per block (a power of two, for the tree reduction), laid across a chroma row.
-THREADS = 128
+#: Threads per block (a power of two, for the tree reduction), laid across a chroma row. Measured on an
+#: H100 (720x576, 3 markers, batches of 256 frames in GPU memory, frames/s): 128 threads 589k, 256
+#: threads 727k, 512 threads 755k (32 rows a block); the pass is bound by each thread's serial work,
+#: not by memory (900k frames/s read 190 GB/s of the card's 3 TB/s), so more threads a block help.
+THREADS = 512
 #: Chroma rows per block. Each block first loads its markers' tables (8 kB each, from the L2 cache)
-#: into shared memory: the more rows a block reads (32 rows of a 720×576 frame's U and V: 23 kB), the
-#: less that load weighs; a batch of 256 such frames is still 2304 blocks. Not tuned: no GPU yet.
-ROWS_PER_BLOCK = 32
+#: into shared memory, so the more rows a block reads the less that load weighs: on the H100, 512
+#: threads read 755k frames/s with 32 rows, 849k with 64 and 908k with 144 (half a 720x576 frame).
+ROWS_PER_BLOCK = 144
+#: Most blocks along the frames; a block takes frames f, f + FRAME_BLOCKS, ... of a batch. Fewer
+#: blocks than frames load the tables less often but run fewer blocks at once, which cost more on the
+#: H100 (512 threads, 144 rows: 908k frames/s with a block a frame, 711k with 128, 494k with 64 for
+#: 256 frames), so by default every frame has its own block.
+FRAME_BLOCKS = 1 << 16
 #: Markers one pass can classify (their tables share the block's shared memory: 8 kB each).
 MAX_MARKERS = 4
 #: 32-bit words of one marker's class table (65 536 bits).
@@ -151,58 +161,76 @@ def moments_from_sums(sums: np.ndarray) -> np.ndarray:
     return out
 
 
-if True:  # the kernel (compiled on first launch); `cuda` must be this module's global for the simulator
+@functools.lru_cache(maxsize=None)
+def class_sums_kernel(threads: int = THREADS, rows_per_block: int = ROWS_PER_BLOCK):
+    """The pass's CUDA kernel for a launch shape (``threads`` a power of two); compiled on first launch.
 
+    The shape is baked in as constants (a shared array's size must be one), so each shape is its own
+    kernel, made once. Arguments: ``(chroma, frames, hc, wc, n_markers, tables, windows, box, out)``;
+    launch with ``threads`` threads a block and a grid of (any number ≤ frames, strips of
+    ``rows_per_block`` rows of ``box``).
+    """
+    if threads < 1 or threads & (threads - 1):
+        raise ValueError(f"threads must be a power of two, not {threads}")
+
+    # `cuda` must be this module's global for the simulator.
     @cuda.jit
-    def _class_sums(chroma, hc, wc, n_markers, tables, windows, box, out):
-        f = cuda.blockIdx.x
+    def kernel(chroma, frames, hc, wc, n_markers, tables, windows, box, out):
         t = cuda.threadIdx.x
         table = cuda.shared.array(_SHARED_TABLE_WORDS, uint32)
-        red = cuda.shared.array((3, THREADS), int64)
+        red = cuda.shared.array((3, threads), int64)
+        # The tables are loaded once a block and serve every frame the block takes: with a block a frame,
+        # loading 3 markers' 24 kB took a third of the block's time at 720x576 (measured on an H100).
         idx = t
         while idx < n_markers * TABLE_WORDS:
             table[idx] = tables[idx // TABLE_WORDS, idx % TABLE_WORDS]
-            idx += THREADS
+            idx += threads
         win = cuda.local.array((MAX_MARKERS, 4), int64)
         acc = cuda.local.array((MAX_MARKERS, 3), int64)
         for k in range(n_markers):
             for q in range(4):
                 win[k, q] = windows[k, q]
-            for q in range(3):
-                acc[k, q] = 0
         cuda.syncthreads()
-        j_start = box[2] + cuda.blockIdx.y * ROWS_PER_BLOCK
-        j_stop = j_start + ROWS_PER_BLOCK
+        j_start = box[2] + cuda.blockIdx.y * rows_per_block
+        j_stop = j_start + rows_per_block
         if j_stop > box[3]:  # not min(): numba's CUDA min() is a device function that needs a driver to compile
             j_stop = box[3]
         v_plane = hc * wc
-        for j in range(j_start, j_stop):
-            row = j * wc
-            i = box[0] + t
-            while i < box[1]:
-                uv = (int64(chroma[f, row + i]) << 8) | int64(chroma[f, v_plane + row + i])
-                for k in range(n_markers):
-                    if win[k, 0] <= i < win[k, 1] and win[k, 2] <= j < win[k, 3]:
-                        if (table[k * TABLE_WORDS + (uv >> 5)] >> (uv & 31)) & 1:
-                            acc[k, 0] += 1
-                            acc[k, 1] += i
-                            acc[k, 2] += j
-                i += THREADS
-        for k in range(n_markers):
-            for q in range(3):
-                red[q, t] = acc[k, q]
-            cuda.syncthreads()
-            step = THREADS // 2
-            while step > 0:
-                if t < step:
-                    for q in range(3):
-                        red[q, t] += red[q, t + step]
-                cuda.syncthreads()
-                step //= 2
-            if t == 0 and red[0, 0] > 0:
+        f = cuda.blockIdx.x
+        while f < frames:  # the same on every thread of the block, so the syncthreads below are safe
+            for k in range(n_markers):
                 for q in range(3):
-                    cuda.atomic.add(out, (f, k, q), red[q, 0])
-            cuda.syncthreads()
+                    acc[k, q] = 0
+            for j in range(j_start, j_stop):
+                row = j * wc
+                i = box[0] + t
+                while i < box[1]:
+                    uv = (int64(chroma[f, row + i]) << 8) | int64(chroma[f, v_plane + row + i])
+                    for k in range(n_markers):
+                        if win[k, 0] <= i < win[k, 1] and win[k, 2] <= j < win[k, 3]:
+                            if (table[k * TABLE_WORDS + (uv >> 5)] >> (uv & 31)) & 1:
+                                acc[k, 0] += 1
+                                acc[k, 1] += i
+                                acc[k, 2] += j
+                    i += threads
+            for k in range(n_markers):
+                for q in range(3):
+                    red[q, t] = acc[k, q]
+                cuda.syncthreads()
+                step = threads // 2
+                while step > 0:
+                    if t < step:
+                        for q in range(3):
+                            red[q, t] += red[q, t + step]
+                    cuda.syncthreads()
+                    step //= 2
+                if t == 0 and red[0, 0] > 0:
+                    for q in range(3):
+                        cuda.atomic.add(out, (f, k, q), red[q, 0])
+                cuda.syncthreads()
+            f += cuda.gridDim.x
+
+    return kernel
 
 
 def _union_box(windows: np.ndarray) -> np.ndarray:
@@ -223,8 +251,11 @@ class GpuClassifier:
         Frame size in luma pixels (even).
     """
 
-    def __init__(self, params: np.ndarray, height: int, width: int) -> None:
+    def __init__(self, params: np.ndarray, height: int, width: int, *, threads: int = THREADS,
+                 rows_per_block: int = ROWS_PER_BLOCK, frame_blocks: int = FRAME_BLOCKS) -> None:
         require_cuda()
+        self._kernel = class_sums_kernel(int(threads), int(rows_per_block))
+        self.threads, self.rows_per_block, self.frame_blocks = int(threads), int(rows_per_block), int(frame_blocks)
         params = np.atleast_2d(np.asarray(params, dtype=np.float64))
         if not 1 <= params.shape[0] <= MAX_MARKERS:
             raise ValueError(f"1 to {MAX_MARKERS} markers per pass, not {params.shape[0]}")
@@ -251,10 +282,11 @@ class GpuClassifier:
 
     def launch(self, d_chroma, d_sums, frames: int, stream=0) -> None:
         """Queue the pass over ``frames`` frames of device chroma into zeroed device sums (frames, markers, 3)."""
-        strips = max(1, -(-int(self.box[3] - self.box[2]) // ROWS_PER_BLOCK))
+        strips = max(1, -(-int(self.box[3] - self.box[2]) // self.rows_per_block))
         if frames and self.box[1] > self.box[0] and self.box[3] > self.box[2]:
-            _class_sums[(frames, strips), THREADS, stream](d_chroma, self.hc, self.wc, self.n_markers,
-                                                          self._tables, self._windows, self._box, d_sums)
+            grid = (min(int(frames), self.frame_blocks), strips)
+            self._kernel[grid, self.threads, stream](d_chroma, int(frames), self.hc, self.wc, self.n_markers,
+                                                     self._tables, self._windows, self._box, d_sums)
 
     def class_sums(self, chroma: np.ndarray) -> np.ndarray:
         """(frames, markers, 3) int64: class count, Σi, Σj (chroma samples) of each marker in each frame."""
