@@ -164,15 +164,23 @@ class ServoTrace:
         return np.where(dt >= 0.0, u, 0.0)
 
 
+@functools.lru_cache(maxsize=256)
 def _zoh(wn: float, zeta: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Zero-order-hold discretisation of ``ωn²/(s² + 2ζωn s + ωn²)`` in the states (y, ẏ)."""
+    """Zero-order-hold discretisation of ``ωn²/(s² + 2ζωn s + ωn²)`` in the states (y, ẏ).
+
+    Cached: a fit simulates every trace at the same (ωn, ζ), and the matrix exponential cost as much
+    as the simulation itself. The arrays are read-only, since every caller shares them.
+    """
     a = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
     b = np.array([0.0, wn * wn])
     m = np.zeros((3, 3))
     m[:2, :2] = a * dt
     m[:2, 2] = b * dt
     e = scipy.linalg.expm(m)
-    return e[:2, :2].copy(), e[:2, 2].copy()
+    phi, gam = e[:2, :2].copy(), e[:2, 2].copy()
+    phi.flags.writeable = False
+    gam.flags.writeable = False
+    return phi, gam
 
 
 @njit(cache=True)
