@@ -59,17 +59,23 @@ __all__ = ["plan", "drive"]
 @click.option("--units", default="normalized", show_default=True, help="Label of the input's units.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.toml"),
               show_default=True, help="Plan file to write.")
+@click.option("--rotor-hz", "rotor_hz", type=float,
+              help="A turning rotor, rev/s: its blades' pitch is read once a revolution each, so the dwells stay "
+                   "below the passes' Nyquist frequency (blades × rev/s / 2); --to defaults to 70 % of it.")
+@click.option("--blades", "n_blades", type=int, help="Blades on the rotor (with --rotor-hz; default 2).")
 def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float, periods: float,
          min_seconds: float, settle_s: float, update_hz: float, step: bool, step_amplitude: float,
          step_seconds: float, lead_in_s: float, tail_s: float, rest_s: float, lead: str, trail: str,
          led: str, units: str, out: Path, amplitudes_text: str | None, sweep_text: str | None,
-         duration_s: float | None, sweep_shape: str, noise_deg: float, record_s: float | None) -> None:
+         duration_s: float | None, sweep_shape: str, noise_deg: float, record_s: float | None,
+         rotor_hz: float | None = None, n_blades: int | None = None) -> None:
     """Plan the tests and write a campaign.toml without videos.
 
     Log-spaced sine dwells (--from, --to, --points), or one frequency sweep
     (--sweep F0:F1 --duration S), then a step test unless --no-step. For a sweep
     the plan prints the coherence expected at the top frequency for the angle
-    noise given (--noise-deg) and warns below 0.6.
+    noise given (--noise-deg) and warns below 0.6. For a turning rotor (--rotor-hz,
+    --blades) the dwells stay below the passes' Nyquist frequency, up to 70 % of it.
     """
     from ..errors import ServoscopeError
     from ..markers.colour import parse_colour
@@ -87,7 +93,22 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
     for option, colour in (("--lead", lead), ("--trail", trail), ("--led", led)):
         parse_colour(colour, what=option)
     markers = {"lead": lead, "trail": trail, "led": led}
-    if sweep_text is not None:
+    if n_blades is not None and rotor_hz is None:
+        raise ServoscopeError("--blades goes with --rotor-hz (a turning rotor's speed, rev/s)")
+    if rotor_hz is not None and sweep_text is not None:
+        raise ServoscopeError("--rotor-hz plans sine dwells below the passes' Nyquist frequency: drop --sweep")
+    if rotor_hz is not None:
+        from .rotor_plan import plan_rotor_sweep
+
+        if duration_s is not None or record_s is not None:
+            raise ServoscopeError("--duration and --record-seconds go with --sweep")
+        sweep = plan_rotor_sweep(
+            fps, rotor_hz, 2 if n_blades is None else n_blades, from_hz=from_hz, to_hz=to_hz, points=points,
+            amplitude=amplitude, periods=periods, min_seconds=min_seconds, settle_s=settle_s, update_hz=update_hz, step=step,
+            step_amplitude=step_amplitude, step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s,
+            rest_s=rest_s, markers=markers, units=units, amplitudes=amplitudes,
+        )
+    elif sweep_text is not None:
         if from_hz is not None or to_hz is not None or amplitudes is not None:
             raise ServoscopeError("--sweep plans one sweep instead of sine dwells: drop --from, --to and --amplitudes")
         if duration_s is None:
@@ -124,6 +145,11 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
         if d.kind == "sweep":
             click.echo(sweep_coherence(d.amplitude, d.from_hz, d.to_hz, d.duration_s, sweep.fps, shape=d.shape,
                                        noise_deg=noise_deg).summary())
+    if sweep.rotor:
+        from .rotor_plan import rotor_lines
+
+        for line in rotor_lines(sweep):
+            click.echo(line)
     for warning in sweep.warnings:
         click.echo(f"warning: {warning}", err=True)
     minutes = sweep.total_s / 60

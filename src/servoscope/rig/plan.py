@@ -172,6 +172,10 @@ class SweepPlan:
         The manifest's ``[analysis] settle_s`` is ``"auto"`` (each dwell's steady state found
         by the fit, :func:`servoscope.sysid.fit_sine`): kept when the plan is written again;
         ``settle_s`` still times the dwells.
+    rotor : dict
+        A turning rotor's plan (``servoscope plan --rotor-hz``, :mod:`servoscope.rig.rotor_plan`):
+        ``rev_per_s``, ``n_blades``, ``pass_rate_hz``, ``pass_nyquist_hz``, ``top_hz``, ``notes``;
+        empty for a static blade. Not written to campaign.toml yet (:func:`plan_campaign`).
     """
 
     fps: float
@@ -188,6 +192,7 @@ class SweepPlan:
     camera: dict[str, Any] = field(default_factory=dict)
     drive: dict[str, Any] = field(default_factory=dict)
     settle_auto: bool = False
+    rotor: dict[str, Any] = field(default_factory=dict)
 
     @property
     def warnings(self) -> list[str]:
@@ -486,6 +491,9 @@ def plan_campaign(plan: SweepPlan, path: str | Path = "campaign.toml", *, includ
             "amplitude": float(d.amplitude), **_sweep_keys(d)}.items() if v is not None} for d in plan.dwells],
         "plan": _plan_table(plan),
     })
+    # Issue 33: a rotor's plan (plan.rotor: rev_per_s, n_blades) belongs in campaign.toml's [rotor]
+    # section, whose reader and writer are the campaign's (Campaign.rotor); until they take it,
+    # the plan's dwells (below the passes' Nyquist frequency) are all it writes of the rotor.
     campaign = campaign_from_data(data, Path(path), check_videos=False, planned=True, read_files=False)
     return campaign if include_plan else replace(campaign, plan={})
 
