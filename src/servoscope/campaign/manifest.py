@@ -18,14 +18,14 @@ from ..camera.model import CameraModel
 from ..camera.plane import Plane
 from ..defaults import TIMESTAMP
 from ..errors import ServoscopeError
-from .sections import (Problems, TestSpec, analysis_section, camera_section, input_section, markers_section,
-                       plan_section, tests_section)
+from .sections import (Problems, RotorSpec, TestSpec, analysis_section, camera_section, input_section,
+                       markers_section, plan_section, rotor_section, tests_section)
 from .toml_io import campaign_to_toml, save_campaign
 
-__all__ = ["TestSpec", "Campaign", "load_campaign"]
+__all__ = ["TestSpec", "Campaign", "RotorSpec", "load_campaign"]
 
 # [plan] is written by `servoscope plan` / `drive` (dwell lengths, rig settings): kept, checked only in a plan.
-_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model"}
+_TOP_KEYS = {"camera", "markers", "input", "tests", "analysis", "plan", "model", "rotor"}
 _MODEL_KEYS = {"fix", "bound", "tie"}
 _Problems = Problems  # the collector of a manifest's problems (sections.Problems)
 
@@ -85,6 +85,9 @@ class Campaign:
         The manifest states ``[analysis] settle_s`` (written again even at the default).
     plan : dict
         The ``[plan]`` table (``servoscope plan`` / ``drive``), as written.
+    rotor : RotorSpec or None
+        A turning rotor filmed at each blade's pass (``[rotor]``: each blade's sticker colours, its speed,
+        the camera's distance, the tip radius); None: a static campaign.
 
     Two campaigns are equal when their files would say the same: the manifest's own path,
     and the camera and plane read from files (compared by their files), are left out.
@@ -115,6 +118,7 @@ class Campaign:
     plane_file: Path | None = None
     settle_stated: bool = field(default=False, compare=False)
     plan: dict = field(default_factory=dict)
+    rotor: RotorSpec | None = None
 
     def held_parameters(self, fix: dict[str, float] | None = None,
                         bounds: dict[str, tuple[float, float]] | None = None
@@ -262,9 +266,10 @@ def campaign_from_data(data: dict, path: Path, *, check_videos: bool = True, kee
     tests, skipped = tests_section(data, base, problems, camera, check_videos=check_videos, keep_going=keep_going,
                                    planned=planned)
     plan = plan_section(data, problems, planned=planned)
+    rotor = rotor_section(data, problems)
     problems.raise_if_any()
     return Campaign(
         path=path.resolve(), **markers, **camera, input_units=units, settle_s=settle, settle_stated=settle_stated,
         tests=tuple(tests), skipped=tuple(skipped), model_fix=model_fix, model_bounds=model_bounds,
-        model_ties=model_ties, plan=plan,
+        model_ties=model_ties, plan=plan, rotor=rotor,
     )

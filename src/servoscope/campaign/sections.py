@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..camera.model import CameraModel
@@ -24,7 +25,7 @@ from ..video.frame_source import MANIFEST_KEYS, SOURCE_SEPARATOR, manifest_frame
 from .inputs import SWEEP_KEYS, TestSpec, check_input, stated_fps
 
 __all__ = ["TestSpec", "Problems", "camera_section", "markers_section", "input_section", "analysis_section", "tests_section",
-           "plan_section", "default_labels"]
+           "plan_section", "default_labels", "RotorSpec", "rotor_section"]
 
 _CAMERA_KEYS = {"calibration", "exposure_s", "readout_s", "timestamp", "plane"}
 _MARKER_KEYS = {"lead", "trail", "led", "reference", "extra"}
@@ -483,3 +484,90 @@ def plan_section(data: dict, problems: Problems, *, planned: bool = False) -> di
                 problems.add(f"tests[{i}].{key}", f"not in a plan (a plan's tests take {', '.join(sorted(_PLAN_TEST_KEYS))})")
     _plan_dwells(plan_t, len(tests) if isinstance(tests, list) else 0, problems)
     return dict(plan_t)
+
+
+# ---------------------------------------------------------------------------
+# [rotor] (issue 33: the rotor turning, filmed edge-on at each blade's pass)
+
+_ROTOR_KEYS = {"blades", "rev_per_s", "camera_distance_m", "tip_radius_m"}
+_BLADE_KEYS = ("lead", "trail")
+
+
+@dataclass(frozen=True)
+class RotorSpec:
+    """``[rotor]``: a turning rotor's blades and what the engineer knows of it.
+
+    Attributes
+    ----------
+    blades : tuple of (str, str)
+        Each blade's (lead, trail) sticker colours as written, blade 0 first.
+    rev_per_s : float or None
+        The rotor speed (rev/s); None: measured from the passes.
+    camera_distance_m : float or None
+        The camera's pinhole to the rotor axis (m).
+    tip_radius_m : float or None
+        The blade tip's radius (m).
+    """
+
+    blades: tuple[tuple[str, str], ...]
+    rev_per_s: float | None = None
+    camera_distance_m: float | None = None
+    tip_radius_m: float | None = None
+
+
+def _rotor_blade(problems: Problems, i: int, entry) -> tuple[str, str] | None:
+    """``[rotor] blades[i]``: ``{lead = "#…", trail = "#…"}``, each a colour (or a brightness); None when bad."""
+    where = f"rotor.blades[{i}]"
+    if not isinstance(entry, dict):
+        problems.add(where, f"must be {{lead = \"#rrggbb\", trail = \"#rrggbb\"}}, got {entry!r}")
+        return None
+    problems.unknown(where, entry.keys(), set(_BLADE_KEYS))
+    colours = []
+    for key in _BLADE_KEYS:
+        if key not in entry:
+            problems.add(f"{where}.{key}",
+                         f"missing: give blade {i}'s {key} sticker's colour, e.g. {key} = \"#rrggbb\"")
+            continue
+        try:
+            spec = parse_colour(entry[key], what="colour")
+        except ServoscopeError as exc:
+            problems.add(f"{where}.{key}", str(exc).removeprefix("colour: "))
+            continue
+        if spec == "auto":
+            problems.add(f"{where}.{key}", "must be a colour (or \"bright\"/\"dark\"), not \"auto\": the colours tell "
+                         "the blades apart")
+            continue
+        colours.append(str(entry[key]))
+    return (colours[0], colours[1]) if len(colours) == 2 else None
+
+
+def rotor_section(data: dict, problems: Problems) -> RotorSpec | None:
+    """``[rotor]``: the turning rotor's blades (their sticker colours) and its optional speed, camera distance and
+    tip radius; None when the manifest has no ``[rotor]`` (a static campaign)."""
+    if "rotor" not in data:
+        return None
+    rotor_t = problems.table(data, "rotor")
+    problems.unknown("rotor", rotor_t.keys(), _ROTOR_KEYS)
+    blades_t = rotor_t.get("blades")
+    if not isinstance(blades_t, list) or not blades_t:
+        problems.add("rotor.blades", "missing: one {lead = \"#rrggbb\", trail = \"#rrggbb\"} a blade, blade 0 first")
+        return None
+    blades = [_rotor_blade(problems, i, entry) for i, entry in enumerate(blades_t)]
+    seen: dict[str, str] = {}
+    for i, blade in enumerate(blades):
+        for key, colour in zip(_BLADE_KEYS, blade or ()):
+            name = colour.strip().lower()
+            if name in ("bright", "dark"):
+                continue  # a monochrome camera's stickers: told apart by where and when, not by colour
+            if name in seen:
+                problems.add(f"rotor.blades[{i}].{key}", f"{colour} is also {seen[name]}'s colour: give each "
+                             "sticker a colour of its own")
+            seen[name] = f"blades[{i}].{key}"
+    numbers = {key: problems.number(f"rotor.{key}", rotor_t[key], positive=True) if key in rotor_t else None
+               for key in ("rev_per_s", "camera_distance_m", "tip_radius_m")}
+    if (numbers["camera_distance_m"] is not None and numbers["tip_radius_m"] is not None
+            and numbers["tip_radius_m"] >= numbers["camera_distance_m"]):
+        problems.add("rotor.tip_radius_m", "must be less than camera_distance_m: the camera stands outside the disc")
+    if any(b is None for b in blades):
+        return None
+    return RotorSpec(blades=tuple(blades), **numbers)

@@ -26,7 +26,7 @@ from .sections import default_labels
 Campaign = Any
 
 __all__ = ["toml_value", "toml_table", "toml_document", "campaign_tables", "campaign_to_toml", "save_campaign",
-           "test_entries", "markers_table", "camera_table"]
+           "test_entries", "markers_table", "camera_table", "rotor_table"]
 
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 
@@ -101,6 +101,17 @@ def markers_table(c: Campaign) -> dict[str, Any]:
     }
 
 
+def rotor_table(c: Campaign) -> dict[str, Any] | None:
+    """``[rotor]``: each blade's ``{lead = …, trail = …}``, then the speed, camera distance and tip radius where
+    said; None for a static campaign (no table)."""
+    r = getattr(c, "rotor", None)
+    if r is None:
+        return None
+    return {"blades": [{"lead": lead, "trail": trail} for lead, trail in r.blades],
+            **{k: None if getattr(r, k) is None else float(getattr(r, k))
+               for k in ("rev_per_s", "camera_distance_m", "tip_radius_m")}}
+
+
 def _source(t, base: Path) -> dict[str, Any]:
     """A test's ``video = …``, or ``frames = …`` with its options."""
     if t.video is None:
@@ -164,10 +175,13 @@ def _plan_tables(plan: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
 
 
 def campaign_tables(c: Campaign) -> list[tuple[str, dict[str, Any]]]:
-    """The manifest's tables in the file's order: camera, markers, input, analysis, model, tests, plan."""
+    """The manifest's tables in the file's order: camera, markers, rotor, input, analysis, model, tests, plan."""
     camera = camera_table(c)
     tables = [("[camera]", camera)] if any(v is not None for v in camera.values()) else []
-    tables += [("[markers]", markers_table(c)), ("[input]", {"units": c.input_units})]
+    tables += [("[markers]", markers_table(c))]
+    rotor = rotor_table(c)
+    tables += [("[rotor]", rotor)] if rotor is not None else []
+    tables += [("[input]", {"units": c.input_units})]
     if c.settle_stated or c.settle_s != SETTLE_S:
         tables.append(("[analysis]", {"settle_s": c.settle_s}))
     tables += _model_tables(c)

@@ -35,6 +35,7 @@ from .._io import atomic_path, write_text_atomic
 from .board import PLANE_MM_PER_PX, render_board_photo
 from .blade_modes import shape_along_chord, blade_modes_of, mode_heaves_px, mode_shape, steady_heave
 from .manifest import TWIN_HEADER, twin_campaign
+from .rotor_campaign import ROTOR_PRESETS, simulate_rotor_campaign
 
 #: A preset's default real-camera options, to tell which ones a campaign set.
 _DEFAULT = CampaignPreset(name="default", servo=None, frequencies_hz=(1.0,))
@@ -404,6 +405,8 @@ def simulate_campaign(outdir: str | Path, preset: str = "paper", seed: int = 0, 
     ServoscopeError
         Unknown preset or override, or invalid settings.
     """
+    if preset in ROTOR_PRESETS:  # a turning rotor (issue 33): its own renderer and truth
+        return simulate_rotor_campaign(outdir, preset, seed, progress=progress, **overrides)
     base = get_preset(preset)
     allowed = {f.name for f in fields(CampaignPreset)} - {"name"}
     # Scene settings (clutter, sticker_shape, ...) go to the scene.
