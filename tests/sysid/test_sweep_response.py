@@ -150,8 +150,8 @@ def test_the_transfer_function_fit_recovers_the_servo(fps):
     # 0.3 %, 0.06 ms. At this noise the coherence (0.999) is limited by the estimator's own small
     # biases, not the noise: over 40 records the parameters scatter by 0.13–0.35 of their stated
     # errors, and ωn, ζ carry a bias of about +0.12 % that no record's interval is narrow enough
-    # to exclude. With noise 1e-3 rad the scatter is 0.9–1.2 stated errors (ζ's 95 % interval
-    # held the truth in 85 % of 40 records, the others 92–95 %).
+    # to exclude. With noise 1e-3 rad the 95 % intervals hold the truth in 96–97 % of 1000 records
+    # (tests/sysid/test_sweep_coverage.py, docs/accuracy.md).
     for name, value in zip(p, (K, WN, ZETA, TAU)):
         assert p[name].holds(value), (name, p[name])
 
