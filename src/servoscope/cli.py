@@ -52,7 +52,7 @@ def cli() -> None:
 
 @cli.command()
 @click.argument("outdir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--preset", default="paper", show_default=True, help="Campaign preset: paper, quick, paper-flap (a flapping blade), paper-bend (the same blade bending, seen by two more stickers), paper-nonlinear (the paper's puzzle: linkage play), paper-sweep (one 12 s logarithmic sweep, 0.5–15 Hz).")
+@click.option("--preset", default="paper", show_default=True, help="Campaign preset: paper, quick, paper-flap (a flapping blade), paper-bend (the same blade bending, seen by two more stickers), paper-nonlinear (the paper's puzzle: linkage play), paper-sweep (one 12 s logarithmic sweep, 0.5–15 Hz), paper-rotor (a two-bladed rotor turning at 20 rev/s, filmed side-on at 4,000 frames/s, docs/twin.md).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed: same seed, same footage.")
 @click.option("--codec", type=click.Choice(["h264", "hevc", "mpeg2", "raw"]),
               help="Video codec (preset's: h264; hevc: phones' H.265; mpeg2: HDV's, the paper's camera).")
@@ -104,8 +104,12 @@ def simulate(outdir: Path, preset: str, seed: int, codec: str | None, bit_rate: 
 
     given = {"codec": codec, "bit_rate": bit_rate, "fps": fps, "exposure_s": exposure_s, "readout_s": readout_s,
              "gop": gop, **camera_options}
-    if fps is not None and exposure_s is None:
+    from .simulate.rotor_campaign import ROTOR_PRESETS
+
+    if fps is not None and exposure_s is None and preset not in ROTOR_PRESETS:
         # The preset's exposure is one interval of its own frame rate; keep it one interval of this one.
+        # (A rotor's preset keeps its short shutter: a whole frame interval would blur a tip passing at
+        # 38 m/s over tens of pixels.)
         given["exposure_s"] = 1.0 / fps
     from ._io import staged_folder
 

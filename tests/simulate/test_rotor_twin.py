@@ -227,3 +227,14 @@ def test_paper_rotor_campaign(tmp_path):
     assert {p["blade"] for p in still} == {0, 1}
     for p in still:
         assert p["pitch_rad"] == pytest.approx(math.radians(0.2) * p["blade"], abs=1e-12)
+
+
+def test_an_unknown_preset_lists_the_rotors_too():
+    from servoscope.errors import ServoscopeError
+    from servoscope.simulate import PRESETS, simulate_campaign
+    from servoscope.simulate.rotor_campaign import ROTOR_PRESETS
+
+    with pytest.raises(ServoscopeError) as err:
+        simulate_campaign("/nonexistent-never-written", "nonesuch")
+    listed = str(err.value).split("choose from ", 1)[1].rstrip(")").split(", ")
+    assert sorted(listed) == sorted([*PRESETS, *ROTOR_PRESETS])

@@ -485,4 +485,6 @@ def get_preset(name: str) -> CampaignPreset:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ServoscopeError(f"unknown simulation preset {name!r} (choose from {', '.join(sorted(PRESETS))})") from None
+        # The rotor's presets (simulate/rotor_campaign.py, which imports this module) are named by hand.
+        raise ServoscopeError(f"unknown simulation preset {name!r} (choose from "
+                              f"{', '.join(sorted([*PRESETS, 'paper-rotor']))})") from None
