@@ -60,6 +60,10 @@ class RotorRig:
         Each blade's pitch offset (rigging), rad; missing entries are 0.
     cyclic_rad, cyclic_phase_rad : float
         A 1/rev pitch ``cyclic_rad·cos(ψ_b − cyclic_phase_rad)`` added to each blade's.
+    coning_rad : float
+        The blades' flapping as a steady coning angle β: each blade's span rises by β out of the rotor
+        plane (about the hinge at the axis), its tip face tilting with it. Not a pitch: what the camera
+        reads of it is the method's error (docs/rotor.md).
     tip_radius_m, root_radius_m : float
         Where the blade's tip face is, and where its drawn span starts (the hub inboard of it
         is not drawn).
@@ -88,6 +92,7 @@ class RotorRig:
     blade_offsets_rad: tuple[float, ...] = ()
     cyclic_rad: float = 0.0
     cyclic_phase_rad: float = 0.0
+    coning_rad: float = 0.0
     tip_radius_m: float = 0.30
     root_radius_m: float = 0.15
     chord_m: float = 0.05
@@ -117,6 +122,8 @@ class RotorRig:
         if not (self.chord_m > 0 and 0 < self.thickness_ratio < 0.5 and self.focal_length_px > 0
                 and self.sticker_diameter_m > 0):
             problems.append("chord_m, thickness_ratio (< 0.5), sticker_diameter_m and focal_length_px must be > 0")
+        if not abs(self.coning_rad) < 0.5:
+            problems.append(f"coning_rad must be within ±0.5 rad, not {self.coning_rad!r}")
         if not all(0 < f < 1 for f in self.sticker_chord_fractions):
             problems.append("sticker_chord_fractions must lie on the chord, in (0, 1)")
         if problems:
@@ -214,13 +221,22 @@ class RotorRig:
         uv = np.asarray(uv_m, dtype=np.float64)
         psi = np.asarray(azimuth_rad, dtype=np.float64)[..., None]
         th = np.asarray(pitch_rad, dtype=np.float64)[..., None]
-        u, v = uv[:, 0], uv[:, 1]
+        x, y, z = self.blade_xyz_m(uv[:, 0], uv[:, 1], radius_m, psi, th)
+        return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+
+    def blade_xyz_m(self, u: np.ndarray, v: np.ndarray, radius_m: np.ndarray | float, psi: np.ndarray,
+                    th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World x, y, z (m) of section points (u along the chord, v across it, at span ``radius_m``) of a blade at
+        azimuths ``psi`` and pitches ``th`` (broadcast together), with the rig's coning."""
         cp, sp, ct, st = np.cos(psi), np.sin(psi), np.cos(th), np.sin(th)
         along_t = u * ct - v * st  # the point's share along e_t
-        along_z = u * st + v * ct  # along e_z
-        x = radius_m * cp - along_t * sp
-        y = radius_m * sp + along_t * cp
-        return np.stack(np.broadcast_arrays(x, y, along_z), axis=-1)
+        along_z = u * st + v * ct  # along the blade's normal (e_z without coning)
+        if self.coning_rad == 0.0:
+            return radius_m * cp - along_t * sp, radius_m * sp + along_t * cp, along_z
+        # Coning β: the span is cos β·e_r + sin β·e_z, the normal −sin β·e_r + cos β·e_z.
+        cb, sb = math.cos(self.coning_rad), math.sin(self.coning_rad)
+        radial = radius_m * cb - along_z * sb
+        return radial * cp - along_t * sp, radial * sp + along_t * cp, radius_m * sb + along_z * cb
 
     def project_px(self, xyz_m: np.ndarray, width: int, height: int) -> np.ndarray:
         """World points (…, 3) to the ideal pinhole picture's pixels (…, 2)."""

@@ -140,13 +140,11 @@ class RotorRenderer:
         psi = np.asarray(azimuth_rad, dtype=np.float64)[:, None]
         th = np.asarray(pitch_rad, dtype=np.float64)[:, None]
         u, v, r = self._uvr[:, 0], self._uvr[:, 1], self._uvr[:, 2]
-        cp, sp, ct, st = np.cos(psi), np.sin(psi), np.cos(th), np.sin(th)
-        along_t = u * ct - v * st
-        along_z = u * st + v * ct
-        depth = rig.camera_distance_m - (r * cp - along_t * sp)
+        wx, wy, wz = rig.blade_xyz_m(u, v, r, psi, th)
+        depth = rig.camera_distance_m - wx
         f = rig.focal_length_px
-        x = 0.5 * (self.width - 1) + f * (r * sp + along_t * cp) / depth
-        y = 0.5 * (self.height - 1) - f * along_z / depth
+        x = 0.5 * (self.width - 1) + f * wy / depth
+        y = 0.5 * (self.height - 1) - f * wz / depth
         return np.stack([x, y], axis=-1)
 
     def blade_polygons(self, azimuth_rad: float, pitch_rad: float, blade: int,
