@@ -1,0 +1,322 @@
+"""Tracking a turning rotor: footage of the blades' passes → a :class:`~servoscope.angle.passes.PassTable`.
+
+The stages together for one video (docs/rotor.md): the markers stage finds each blade's
+stickers frame by frame and cuts the passes (:mod:`servoscope.markers.passes`); the camera
+stage undistorts the centroids (a lens model given); the angle stage reads each pass's pitch
+at ψ = 0 and the rotor speed (:mod:`servoscope.angle.passes`); the LED's switch (t0) is dated
+by the static tracker's own LED timing (:func:`servoscope.markers.led_level.input_start`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..angle.geometry import angle_rad_from_centroids
+from ..angle.passes import (MIN_PASS_FRAMES, PassTable, centre_column, crossing_time, fit_passes, frame_variance_rad2,
+                            MIN_NULL_PASSES, midpoint_variance_rad2, rotor_speed, with_pass_error)
+from ..camera.undistort import undistort_centroids
+from ..errors import ServoscopeError
+from ..markers.colour import BRIGHTNESS, parse_colour
+from ..markers.led_level import input_start
+from ..markers.led_timing import exposure_middle_offset_s
+from ..markers.passes import RotorSightings, blade_colours, scan_rotor_video, segment_passes
+from ..markers.passes_mono import scan_rotor_mono
+from ..markers.settings import TrackerSettings
+from ..video.reader import probe_video
+
+__all__ = ["blades_by_order", "passes_from_sightings", "track_passes"]
+
+
+def track_passes(path: str | Path, settings: TrackerSettings | None = None, *, rotor,
+                 progress: Callable[[int], None] | None = None) -> PassTable:
+    """Every pass of every blade through one video of a turning rotor: pitch at ψ = 0, error, rotor speed, t0.
+
+    Parameters
+    ----------
+    path : path-like
+        Footage from a camera in the rotor's plane looking at the axis: colour (each blade its
+        own pair of colours), or monochrome (every sticker ``"bright"``: the blades are then
+        told apart by their order, :func:`blades_by_order`).
+    settings : TrackerSettings, optional
+        The LED (``led``, ``led_near``), the shutter (``exposure_s``, ``timestamp``) and the
+        lens model (``camera``) as for ``servoscope track``; the marker colours in it are not
+        used (each blade's are ``rotor``'s).
+    rotor : RotorSpec-like
+        ``blades`` (one ``(lead, trail)`` pair of colours per blade, blade 0 first), and
+        optionally ``rev_per_s`` (used when no blade passes twice), ``camera_distance_m`` and
+        ``tip_radius_m`` (the foreshortening's curvature when the passes do not tell it).
+        Pairs alone are taken as the blades.
+    progress : callable, optional
+        Called with the number of frames done, now and then.
+
+    Returns
+    -------
+    PassTable
+
+    Raises
+    ------
+    ServoscopeError
+        When the video never shows a pass (naming what the colours' cheap test saw), or the
+        rotor's speed can be neither measured nor read from ``rotor``.
+    """
+    path = Path(path)
+    settings = settings or TrackerSettings()
+    info = probe_video(path)
+    warnings: list[str] = []
+    led = settings.led
+    if settings.readout_s > 0:
+        warnings.append("rolling shutter: not corrected for a rotor's passes (the tip crosses the picture in "
+                        "milliseconds; use a global shutter)")
+    n_mono = _monochrome_blades(rotor)
+    if n_mono:
+        # Bright stickers on every blade: found by brightness, the blades told by their order.
+        led_bright = led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS
+        if led is not None and not led_bright:
+            warnings.append(f"LED {led!r}: a coloured LED is not read on monochrome footage; no t0")
+            led = None
+        sightings = blades_by_order(scan_rotor_mono(path, led=led is not None, led_near=settings.led_near,
+                                                    progress=progress), n_mono)
+        if n_mono > 1:
+            warnings.append(f"monochrome: the {n_mono} blades are told apart by their order (blade 0 is the first "
+                            "seen); give each blade its own colours to know which is which")
+    else:
+        pairs = blade_colours(rotor)
+        if led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS:
+            warnings.append(f"LED {led!r}: a brightness LED is not read on colour footage of a rotor; no t0")
+            led = None
+        sightings = scan_rotor_video(path, pairs, led=led, led_near=settings.led_near, progress=progress)
+    table = passes_from_sightings(path, sightings, settings, rotor=rotor, warnings=warnings)
+    own: list[str] = []
+    clock = sightings.time_s + exposure_middle_offset_s(settings.timestamp, settings.exposure_s)
+    t0_s = t0_unc = None
+    if led is not None:
+        start = input_start(sightings.led_level_dn, sightings.led_peak_dn, clock, sightings.time_s, settings.exposure_s,
+                            0.0, sightings.snapshot_rgb, parse_colour(led), info, own, led_xy=sightings.led_xy_px)
+        t0_s, t0_unc = start.t0_s, start.t0_uncertainty_s
+        if sightings.led_xy_px is None:
+            own.append("LED not found in a frame without a blade: no input start (t0)")
+    return replace(table, t0_s=t0_s, t0_uncertainty_s=t0_unc, warnings=tuple(table.warnings) + tuple(own))
+
+
+def _shared_errors(good, fits, lead, trail, clock, warnings: list[str]):
+    """Each pass's pitch error with what its frames share: the midpoint null channel, pooled over the blades.
+
+    Each blade's passes give the midpoint's residual variance (:func:`midpoint_variance_rad2`); they
+    are pooled over the blades (one camera, alike stickers) and shrunk towards the frames' floor
+    (:func:`frame_variance_rad2`) with the weight of :data:`FLOOR_PRIOR_DOF` degrees of freedom, so
+    that a short clip's few passes do not make a small error from a lucky variance.
+    """
+    done = [f for f in fits if f is not None]
+    floor = frame_variance_rad2(done)
+    total, dof_total = 0.0, 0
+    for b in sorted({p.blade for p in good}):
+        mine = [j for j, p in enumerate(good) if p.blade == b and fits[j] is not None]
+        heights, seps = [], []
+        for j in mine:
+            idx = good[j].whole
+            tau = clock[idx] - fits[j].time_s
+            ymid = 0.5 * (lead[idx, b, 1] + trail[idx, b, 1])
+            heights.append(float(np.polyfit(tau, ymid, 1)[1]))
+            seps.append(float(np.median(np.hypot(*(lead[idx, b] - trail[idx, b]).T))))
+        var, dof = midpoint_variance_rad2(np.array([fits[j].pitch_rad for j in mine]), np.array(heights),
+                                          float(np.median(seps)) if seps else math.nan)
+        if dof:
+            total += var * dof
+            dof_total += dof
+    var = (total + FLOOR_PRIOR_DOF * floor) / (dof_total + FLOOR_PRIOR_DOF)
+    if dof_total < FLOOR_PRIOR_DOF:
+        warnings.append(f"{len(done)} passes: the pitch's error rests mostly on the frames' scatter (the midpoint's "
+                        f"check needs {MIN_NULL_PASSES} passes of a blade, and more to be sure)")
+    fixed = iter(with_pass_error(done, var, add_line=False))
+    return [None if f is None else next(fixed) for f in fits]
+
+
+#: Degrees of freedom the frames' floor weighs with against the midpoint's null channel.
+FLOOR_PRIOR_DOF = 4
+
+
+def _monochrome_blades(rotor) -> int:
+    """The number of blades when every sticker is told by brightness (monochrome footage), else 0."""
+    blades = getattr(rotor, "blades", rotor) or ()
+    specs = []
+    for b in blades:
+        specs.extend((b["lead"], b["trail"]) if isinstance(b, dict) else tuple(b))
+    if specs and all(isinstance(x, str) and x.strip().lower() in BRIGHTNESS for x in specs):
+        return len(blades)
+    return 0
+
+
+def blades_by_order(sightings: RotorSightings, n_blades: int) -> RotorSightings:
+    """One-column sightings (the blades not told apart) spread over ``n_blades`` columns: pass k is blade k mod N.
+
+    The passes are cut as :func:`~servoscope.markers.passes.segment_passes` cuts them and numbered
+    in time order (blade 0 the first seen). A pass missed altogether (a blade hidden for a
+    revolution) would renumber those after it: the pass-to-pass interval is checked, and a
+    gap of more than 1.5 intervals is refused.
+
+    Raises
+    ------
+    ServoscopeError
+        When a pass is missing from the sequence.
+    """
+    passes = segment_passes(sightings)
+    n = sightings.time_s.size
+    seen = np.zeros((n, n_blades), dtype=bool)
+    lead = np.full((n, n_blades, 2), np.nan)
+    trail = np.full((n, n_blades, 2), np.nan)
+    ls = np.full((n, n_blades), np.nan)
+    ts = np.full((n, n_blades), np.nan)
+    starts = np.array([p.first_frame for p in passes], dtype=float)
+    if starts.size > 2:
+        gaps = np.diff(starts)
+        if gaps.max() > 1.5 * np.median(gaps):
+            k = int(np.argmax(gaps))
+            raise ServoscopeError(f"monochrome footage: a pass is missing between frames {int(starts[k])} and "
+                                  f"{int(starts[k + 1])}, so the blades cannot be told apart by their order; give "
+                                  "each blade its own colours, or film without the gap")
+    for k, p in enumerate(passes):
+        b = k % n_blades
+        sl = slice(p.first_frame, p.last_frame + 1)
+        seen[sl, b] = sightings.seen[sl, 0]
+        lead[sl, b], trail[sl, b] = sightings.lead_xy_px[sl, 0], sightings.trail_xy_px[sl, 0]
+        ls[sl, b], ts[sl, b] = sightings.lead_sigma_px[sl, 0], sightings.trail_sigma_px[sl, 0]
+    return replace(sightings, seen=seen, lead_xy_px=lead, trail_xy_px=trail, lead_sigma_px=ls, trail_sigma_px=ts)
+
+
+def _no_pass(path: Path, sightings: RotorSightings, passes) -> ServoscopeError:
+    seen = "; ".join(sightings.colours_seen)
+    if passes:
+        what = (f"{len(passes)} blade sightings, none with both stickers whole in {MIN_PASS_FRAMES} frames "
+                "(stickers cut by the picture's edge, or too few frames a pass)")
+    else:
+        what = "no blade's stickers in any frame"
+    return ServoscopeError(
+        f"{path}: no pass of a blade found in {sightings.time_s.size} frames ({what}). Colours seen: {seen}. "
+        "Check [rotor] blades' colours against the footage and that the camera looks at the rotor's axis "
+        "from its plane")
+
+
+def passes_from_sightings(path: str | Path, sightings: RotorSightings, settings: TrackerSettings | None = None, *,
+                          rotor=None, warnings: list[str] | None = None) -> PassTable:
+    """The pass table from :func:`~servoscope.markers.passes.scan_rotor_video`'s sightings (no LED t0).
+
+    Parameters
+    ----------
+    path : path-like
+        The video (named in the table and in errors).
+    sightings : RotorSightings
+    settings : TrackerSettings, optional
+        ``camera`` (undistortion), ``exposure_s`` and ``timestamp`` (the exposures' middles).
+    rotor : RotorSpec-like, optional
+        ``rev_per_s``, ``camera_distance_m``, ``tip_radius_m`` where known.
+    warnings : list of str, optional
+        Appended to the table's.
+
+    Returns
+    -------
+    PassTable
+
+    Notes
+    -----
+    Long because it is the angle stage's order written out: undistort, the centre column,
+    the crossing times, the rotor speed, the pitches.
+    """
+    path = Path(path)
+    settings = settings or TrackerSettings()
+    warnings = list(warnings or [])
+    lead = sightings.lead_xy_px.copy()
+    trail = sightings.trail_xy_px.copy()
+    nb = lead.shape[1]
+    if settings.camera is not None:
+        for b in range(nb):
+            for arr in (lead, trail):
+                ok = np.isfinite(arr[:, b, 0])
+                if ok.any():
+                    ideal, outside = undistort_centroids(settings.camera, arr[ok, b], np.zeros(int(ok.sum())))
+                    ideal[outside] = np.nan
+                    arr[ok, b] = ideal
+    clock = sightings.time_s + exposure_middle_offset_s(settings.timestamp, settings.exposure_s)
+    segments = segment_passes(sightings)
+    good = [p for p in segments if p.whole.size >= MIN_PASS_FRAMES]
+    if not good:
+        raise _no_pass(path, sightings, segments)
+    if len(good) < len(segments):
+        warnings.append(f"{len(segments) - len(good)} of {len(segments)} passes left out: fewer than "
+                        f"{MIN_PASS_FRAMES} frames with both stickers whole (cut by the picture's edge)")
+    # ψ = 0's column, each blade's (its stickers' midpoint need not sit on the pitch axis).
+    centres = []
+    for b in range(nb):
+        mine = [p for p in good if p.blade == b]
+        if not mine:
+            centres.append(math.nan)
+            continue
+        idx = np.concatenate([p.whole for p in mine])
+        pid = np.concatenate([np.full(p.whole.size, j) for j, p in enumerate(mine)])
+        xm = 0.5 * (lead[idx, b, 0] + trail[idx, b, 0])
+        sep = lead[idx, b, 0] - trail[idx, b, 0]
+        xc, xc_err = centre_column(xm, sep, pid)
+        if not math.isfinite(xc) or not xc_err < 0.1 * sightings.width:
+            fallback = (float(np.asarray(settings.camera.camera_matrix)[0, 2]) if settings.camera is not None
+                        else 0.5 * (sightings.width - 1))
+            warnings.append(f"blade {b}: the stickers' separation does not show where ψ = 0 is; "
+                            f"taken at the picture's centre column ({fallback:.1f} px)")
+            xc = float(fallback)
+        centres.append(xc)
+    t_c = np.full(len(good), np.nan)
+    t_c_err = np.full(len(good), np.nan)
+    for j, p in enumerate(good):
+        idx = p.whole
+        xm = 0.5 * (lead[idx, p.blade, 0] + trail[idx, p.blade, 0])
+        t_c[j], t_c_err[j] = crossing_time(clock[idx], xm, centres[p.blade])
+    blade = np.array([p.blade for p in good], dtype=np.int64)
+    rate, rate_err, _ = rotor_speed(t_c, blade, t_c_err)
+    given = getattr(rotor, "rev_per_s", None) if rotor is not None else None
+    if not math.isfinite(rate):
+        if given is None:
+            raise ServoscopeError(f"{path}: no blade passes twice, so the rotor's speed is not measured; give "
+                                  "[rotor] rev_per_s, or film more revolutions")
+        rate, rate_err = float(given), math.nan
+        warnings.append(f"rotor speed taken from [rotor] rev_per_s ({rate:g} rev/s): no blade passes twice")
+    elif given is not None and abs(rate - given) > 0.01 * given:
+        warnings.append(f"rotor speed measured {rate:.5g} rev/s, [rotor] rev_per_s says {given:g}: the measured one "
+                        "is used")
+    k_held = None
+    dist = getattr(rotor, "camera_distance_m", None) if rotor is not None else None
+    tip = getattr(rotor, "tip_radius_m", None) if rotor is not None else None
+    data = []
+    for p in good:
+        idx = p.whole
+        data.append((clock[idx], angle_rad_from_centroids(lead[idx, p.blade], trail[idx, p.blade])))
+    fits, k, k_err = fit_passes(data, t_c, rate, t_c_stderr_s=t_c_err, k=k_held, shared_error=False)
+    if not math.isfinite(k_err) and dist and tip and dist > tip:
+        # The passes do not tell the curvature: the pinhole's, from the rig's geometry.
+        k = (dist + tip) / (2.0 * (dist - tip))
+        fits, k, k_err = fit_passes(data, t_c, rate, t_c_stderr_s=t_c_err, k=k, shared_error=False)
+        warnings.append(f"foreshortening from [rotor]'s camera distance and tip radius (k = {k:.3g}): the passes "
+                        "do not tell it")
+    fits = _shared_errors(good, fits, lead, trail, clock, warnings)
+    rows = [(p, f) for p, f in zip(good, fits) if f is not None]
+    return PassTable(
+        video=path.name,
+        time_s=[f.time_s for _, f in rows],
+        blade=[p.blade for p, _ in rows],
+        pitch_rad=[f.pitch_rad for _, f in rows],
+        pitch_stderr_rad=[f.pitch_stderr_rad for _, f in rows],
+        azimuth_from_rad=[f.azimuth_from_rad for _, f in rows],
+        azimuth_to_rad=[f.azimuth_to_rad for _, f in rows],
+        frames=[p.frames for p, _ in rows],
+        rev_per_s=float(rate),
+        rev_per_s_stderr=float(rate_err),
+        foreshortening_k=float(k),
+        foreshortening_k_stderr=float(k_err),
+        centre_column_px=tuple(centres),
+        first_frame=[p.first_frame for p, _ in rows],
+        last_frame=[p.last_frame for p, _ in rows],
+        pitch_rate_rad_s=[f.pitch_rate_rad_s for _, f in rows],
+        warnings=tuple(warnings),
+    )

@@ -1,0 +1,78 @@
+"""A turning rotor on monochrome 12-bit MRAW footage (markers.passes_mono): bright stickers, blades by their order."""
+
+import math
+
+import numpy as np
+import pytest
+
+from servoscope.errors import ServoscopeError
+from servoscope.markers.settings import TrackerSettings
+from servoscope.pipeline.rotor import track_passes
+from servoscope.simulate.rotor import ROTOR_BLADE_COLOURS, RotorRig
+from servoscope.simulate.rotor_render import render_rotor_clip
+
+EXPOSURE_S = 1 / 40000
+OFFSETS = (0.0, math.radians(0.2))
+BRIGHT = [("bright", "bright"), ("bright", "bright")]
+
+
+def collective(t):
+    return np.radians(6.0) + 0.03 * np.sin(2 * np.pi * 11.0 * np.asarray(t))
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    rig = RotorRig(blades=ROTOR_BLADE_COLOURS[:2], rev_per_s=22.0, blade_offsets_rad=OFFSETS, azimuth0_rad=0.5,
+                   drift_fraction=0.003, cyclic_rad=0.0)
+    path = tmp_path_factory.mktemp("rotor_mono") / "clip"
+    truth = render_rotor_clip(path, rig, collective, duration_s=0.26, fps=4000, exposure_s=EXPOSURE_S, width=320,
+                              height=240, led_off_s=0.1, noise_seed=2, monochrome=True, bit_depth=12)
+    cih = next(path.glob("*.cih"))
+    table = track_passes(cih, TrackerSettings(lead="bright", trail="bright", led="bright", exposure_s=EXPOSURE_S),
+                         rotor=BRIGHT)
+    return rig, cih, truth, table
+
+
+def test_mono_passes_against_truth(clip):
+    rig, path, truth, table = clip
+    listed = [p for p in truth["passes"] if p["first_frame"] > 0 and p["last_frame"] < len(truth["time_s"]) - 1]
+    assert len(table) == len(listed) >= 9
+    # The blades by their order: blade 0 is the first seen, so the labels match truth's up to a rotation.
+    first = min(listed, key=lambda p: p["first_frame"])["blade"]
+    for p in listed:
+        j = int(np.argmin(np.abs(table.time_s - p["time_s"])))
+        assert abs(table.time_s[j] - p["time_s"]) < 1e-4
+        assert table.blade[j] == (p["blade"] - first) % 2
+    true = collective(table.time_s) + np.array(OFFSETS)[(table.blade + first) % 2]
+    err = table.pitch_rad - true
+    assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.01  # measured 0.003° (docs/rotor.md)
+    z = err / table.pitch_stderr_rad
+    assert 0.3 < math.sqrt(np.mean(z ** 2)) < 1.5
+    assert any("told apart by their order" in w for w in table.warnings)
+    t = table.time_s
+    span = (rig.azimuth_rad(t.max(), 0) - rig.azimuth_rad(t.min(), 0)) / (2 * np.pi * (t.max() - t.min()))
+    assert abs(table.rev_per_s / span - 1) < 1e-4
+    assert abs(table.t0_s - truth["t0_s"]) < 5 * table.t0_uncertainty_s + 2e-6
+
+
+def test_mono_colours_on_mono_footage_refused(clip):
+    rig, path, truth, table = clip
+    with pytest.raises(ServoscopeError, match="no pass of a blade"):
+        track_passes(path, TrackerSettings(led=None), rotor=[("#ff0000", "#00ff00")])
+
+
+def test_blades_by_order_refuses_a_missing_pass():
+    from servoscope.markers.passes import RotorSightings
+    from servoscope.pipeline.rotor import blades_by_order
+
+    n = 400
+    seen = np.zeros((n, 1), bool)
+    for start in (10, 60, 110, 210, 260):  # the pass at 160 is missing
+        seen[start:start + 10, 0] = True
+    xy = np.full((n, 1, 2), np.nan)
+    s = RotorSightings(np.arange(n) / 4000, seen, xy, xy.copy(), np.full((n, 1), np.nan), np.full((n, 1), np.nan))
+    with pytest.raises(ServoscopeError, match="missing between frames 110 and 210"):
+        blades_by_order(s, 2)
+    seen[160:170, 0] = True
+    spread = blades_by_order(s, 2)
+    assert spread.seen[:, 0].sum() == 30 and spread.seen[:, 1].sum() == 30 and spread.seen[60:70, 1].all()
