@@ -184,3 +184,21 @@ def test_output_moved_flags_a_step_lost_in_the_noise():
     still = analyse_step(t, flat, t0_s=T0, step_size=STEP)
     assert not still.output_moved
     assert "no discernible step response (change within 10 noise sigma)" in still.warnings
+
+
+@pytest.mark.parametrize("num,den", [([0.23 * 37.0**2], [1.0, 2 * 0.65 * 37.0, 37.0**2]), ([1.0], [1.0, 1.0]),
+                                     ([2.0, 3.0], [1.0, 5.0, 6.0, 4.0]), ([1.0, 0.5], [1.0, 0.2, 100.0]),
+                                     ([0.5, 1.0, 2.0], [1.0, 3.0, 2.0])])
+def test_step_response_on_grid_is_python_controls(num, den):
+    # The oracle: python-control's own step response (its Python loop), on the grids the step analysis uses.
+    import control
+
+    from servoscope.sysid.step import step_response_on_grid
+
+    model = control.tf(num, den)
+    grid = np.linspace(0.0, 4.0, 8001)
+    want = np.asarray(control.step_response(model, T=grid).outputs, dtype=float).ravel()
+    got = step_response_on_grid(model, grid)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, float(np.abs(want).max())))
+    np.testing.assert_allclose(step_response_on_grid(control.ss(model), grid), want, rtol=0, atol=1e-12 * max(
+        1.0, float(np.abs(want).max())))

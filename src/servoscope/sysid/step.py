@@ -46,6 +46,8 @@ from collections.abc import Callable
 
 import control
 import numpy as np
+import scipy.linalg
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
@@ -55,7 +57,7 @@ from servoscope.errors import ServoscopeError
 from servoscope.results import readonly
 from servoscope.sysid.step_result import StepAnalysis, step_discernible
 
-__all__ = ["StepAnalysis", "analyse_step", "model_step_metrics", "unit_step_function"]
+__all__ = ["StepAnalysis", "analyse_step", "model_step_metrics", "step_response_on_grid", "unit_step_function"]
 
 _SETTLING_BAND = 0.02
 _RISE_LIMITS = (0.1, 0.9)
@@ -99,6 +101,52 @@ def _cubic_cross(t: NDArray[np.float64], v: NDArray[np.float64], i: int, level: 
     return float(t[i] + inside[0] * (t[i + 1] - t[i]))
 
 
+@njit(cache=True)
+def _held_input_response(ad, bd, c, d, n):  # pragma: no cover - numba
+    # From rest with a unit input held: x[k+1] = Ad x[k] + Bd, y[k] = C x[k] + D (exact at the grid's points).
+    m = ad.shape[0]
+    x = np.zeros(m)
+    nxt = np.empty(m)
+    out = np.empty(n)
+    for k in range(n):
+        acc = d
+        for i in range(m):
+            acc += c[i] * x[i]
+        out[k] = acc
+        for i in range(m):
+            total = bd[i]
+            for j in range(m):
+                total += ad[i, j] * x[j]
+            nxt[i] = total
+        for i in range(m):
+            x[i] = nxt[i]
+    return out
+
+
+def step_response_on_grid(model: control.TransferFunction | control.StateSpace,
+                          grid: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A continuous SISO model's response to a unit step at t = 0, on a uniform grid starting at 0.
+
+    The same values as :func:`control.step_response` (the state's exact recursion between grid
+    points, a constant input being exact under a zero-order hold), to rounding, without its loop over
+    the samples in Python: on the 20,000-400,000-point grids below it took ~0.1 s a model, most of an
+    identification's time.
+    """
+    grid = np.asarray(grid, dtype=np.float64)
+    sys = control.ss(model)
+    a, b, c, d = (np.atleast_2d(np.asarray(v, dtype=np.float64)) for v in (sys.A, sys.B, sys.C, sys.D))
+    m = a.shape[0] if a.size else 0
+    if grid.size < 2 or m == 0:
+        return np.full(grid.size, float(d[0, 0]))
+    dt = float(grid[1] - grid[0])
+    aug = np.zeros((m + 1, m + 1))
+    aug[:m, :m] = a * dt
+    aug[:m, m] = b[:, 0] * dt
+    e = scipy.linalg.expm(aug)
+    return _held_input_response(np.ascontiguousarray(e[:m, :m]), np.ascontiguousarray(e[:m, m]),
+                                np.ascontiguousarray(c[0]), float(d[0, 0]), grid.size)
+
+
 def unit_step_function(model: control.TransferFunction, span_s: float, dt_hint_s: float) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
     """Spline of the model's unit-step response normalized to DC gain 1 (0 for t < 0)."""
     if not isinstance(model, (control.TransferFunction, control.StateSpace)):
@@ -115,8 +163,7 @@ def unit_step_function(model: control.TransferFunction, span_s: float, dt_hint_s
     dt = min(dt_hint_s / 20.0, 0.02 / max(pmax, 1e-12))
     n = int(min(200_001, max(2001, math.ceil(span_s / dt) + 1)))
     grid = np.linspace(0.0, span_s, n)
-    resp = control.step_response(model, T=grid)
-    vals = np.asarray(resp.outputs, dtype=float).ravel() / dc
+    vals = step_response_on_grid(model, grid) / dc
     spline = CubicSpline(grid, vals)
 
     def s(u: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -435,7 +482,10 @@ def model_step_metrics(tf: control.TransferFunction, *, dead_time_s: float = 0.0
     t_end = 12.0 / slow
     n = int(min(400_001, max(20_001, math.ceil(t_end * fast * 200))))
     grid = np.linspace(0.0, t_end, n)
-    info = control.step_info(tf, T=grid, SettlingTimeThreshold=_SETTLING_BAND, RiseTimeLimits=_RISE_LIMITS)
+    # The response computed here (python-control's own simulation loops in Python); its final value the
+    # model's DC gain, as step_info takes it from a system.
+    info = control.step_info(step_response_on_grid(tf, grid), T=grid, yfinal=float(np.real(control.dcgain(tf))),
+                             SettlingTimeThreshold=_SETTLING_BAND, RiseTimeLimits=_RISE_LIMITS)
     tau = float(dead_time_s)
     return {
         "rise_time_s": float(info["RiseTime"]),
