@@ -45,6 +45,7 @@ from ..video.reader import iter_yuv_frames
 from . import kernels as K
 from .colour import BRIGHTNESS, ColourModel, parse_colour, ycbcr_bt601
 from .led_level import LED_PEAK_FRAMES, disk_level
+from .yuv_engine import learn_colour_model
 
 __all__ = ["MIN_COARSE", "PassFrames", "RotorSightings", "blade_colours", "scan_rotor_video", "segment_passes"]
 
@@ -54,8 +55,6 @@ MIN_COARSE = 2
 COARSE_GROW_PX = 8
 #: Hue half-width of a seed colour's cone before its sticker is learned (rad).
 SEED_TOLERANCE_RAD = math.radians(20.0)
-#: The learned cone's limits (rad), as the static YUV engine's.
-TOLERANCE_RANGE_RAD = (math.radians(10.0), math.radians(20.0))
 #: Support beyond a sticker's extent (px): its edge blur and the codec's chroma smear. Small: a tip
 #: sticker sits close to the section's edge, and a support or ring that reaches past it takes in sky
 #: the ring's bins mix with the blade (on the twin's raw footage, per-frame angle SD 0.069° with
@@ -151,24 +150,7 @@ class _Sticker:
         # Luma of the 2×2 block each chroma sample covers.
         yb = np.mean([Y[np.minimum(2 * cj + dy, Y.shape[0] - 1), np.minimum(2 * ci + dx, Y.shape[1] - 1)]
                       for dy in (0, 1) for dx in (0, 1)], axis=0)
-        um, vm, ym = float(np.median(u)), float(np.median(v)), float(np.median(yb))
-        sat = math.hypot(um - 128.0, vm - 128.0)
-        ang = math.atan2(vm - 128.0, um - 128.0)
-        spread = np.abs(np.angle(np.exp(1j * (np.arctan2(v - 128.0, u - 128.0) - ang))))
-        tol = float(np.clip(3.0 * np.percentile(spread, 90), *TOLERANCE_RANGE_RAD))
-
-        def robust_var(x):
-            mad = float(np.median(np.abs(x - np.median(x))))
-            return (1.4826 * mad) ** 2 + 0.25
-
-        p = self.prm
-        p[K.P.YM], p[K.P.UM], p[K.P.VM] = ym, um, vm
-        p[K.P.DIR_U], p[K.P.DIR_V] = (um - 128.0) / max(sat, 1e-9), (vm - 128.0) / max(sat, 1e-9)
-        p[K.P.COS_TOL] = math.cos(min(tol, self.max_tol))
-        p[K.P.SAT_MIN] = max(6.0, 0.45 * sat)
-        p[K.P.VAR_Y] = robust_var(yb)
-        p[K.P.VAR_C] = max(0.5 * (robust_var(u) + robust_var(v)), p[K.P.VAR_Y])
-        self.angle = ang
+        self.angle, _ = learn_colour_model(self.prm, yb, u, v, self.max_tol)
         self.learned = True
 
 

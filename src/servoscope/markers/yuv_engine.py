@@ -30,7 +30,7 @@ from .marker_state import Blob, MarkerTracker
 from .moments import Moments
 from .refind import search_window, take_markers
 
-__all__ = ["run_yuv"]
+__all__ = ["learn_colour_model", "run_yuv"]
 
 
 #: Luma weight of the unmixing (see kernels): luma's α weighs w_Y·c_Y² against
@@ -148,6 +148,38 @@ def _line_direction(lead: MarkerTracker, trail: MarkerTracker) -> float | None:
     return math.atan2(a[1] - b[1], a[0] - b[0])
 
 
+def _robust_var(x: np.ndarray) -> float:
+    mad = float(np.median(np.abs(x - np.median(x))))
+    return (1.4826 * mad) ** 2 + 0.25
+
+
+def learn_colour_model(prm: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarray,
+                       max_tolerance_rad: float = math.radians(20.0)) -> tuple[float, float]:
+    """Set a YUV kernel row's colour model from samples of a marker's core; its hue and the cone's half-angle (rad).
+
+    The median colour (``YM``, ``UM``, ``VM``), its chroma direction, the hue cone's half-angle
+    (3 × the samples' 90th-percentile spread about it, within 10°-20° and at most
+    ``max_tolerance_rad``), the saturation floor (0.45 × its saturation, at least 6) and the
+    luma and chroma noise (robust variances; the chroma's at least the luma's). ``y``, ``u``, ``v``:
+    the samples' luma and chroma (float arrays of one length). The half-angle returned is the
+    samples' own (before ``max_tolerance_rad``).
+    """
+    ym, um, vm = float(np.median(y)), float(np.median(u)), float(np.median(v))
+    sat = math.hypot(um - 128.0, vm - 128.0)
+    mean_ang = math.atan2(vm - 128.0, um - 128.0)
+    spread = np.abs(np.angle(np.exp(1j * (np.arctan2(v - 128.0, u - 128.0) - mean_ang))))
+    tol = float(np.clip(3.0 * np.percentile(spread, 90), math.radians(10.0), math.radians(20.0)))
+    prm[K.P.YM], prm[K.P.UM], prm[K.P.VM] = ym, um, vm
+    prm[K.P.DIR_U], prm[K.P.DIR_V] = (um - 128.0) / max(sat, 1e-9), (vm - 128.0) / max(sat, 1e-9)
+    prm[K.P.COS_TOL] = math.cos(min(tol, max_tolerance_rad))
+    prm[K.P.SAT_MIN] = max(6.0, 0.45 * sat)
+    prm[K.P.VAR_Y] = _robust_var(y)
+    # A codec leaves a flat interior almost free of chroma noise while its chroma errors at the
+    # edges are larger: take at least the luma's noise for the chroma.
+    prm[K.P.VAR_C] = max(0.5 * (_robust_var(u) + _robust_var(v)), prm[K.P.VAR_Y])
+    return mean_ang, tol
+
+
 def _learn_yuv(tracker: MarkerTracker, frame, m: Moments, margin_px: float) -> None:
     """Marker colour (median), chroma direction, hue tolerance and noise from the core of the found blob."""
     reach = float(tracker.reach_px or tracker.extent_px)
@@ -170,22 +202,8 @@ def _learn_yuv(tracker: MarkerTracker, frame, m: Moments, margin_px: float) -> N
     Y = frame.y[y0:y1, x0:x1][core].astype(np.float64)
     U = K.chroma_np(frame.u, xs, ys, frame.row_offset, frame.row_step)
     V = K.chroma_np(frame.v, xs, ys, frame.row_offset, frame.row_step)
-    ym, um, vm = float(np.median(Y)), float(np.median(U)), float(np.median(V))
-    sat = math.hypot(um - 128.0, vm - 128.0)
-    ang = np.arctan2(V - 128.0, U - 128.0)
-    mean_ang = math.atan2(vm - 128.0, um - 128.0)
-    spread = np.abs(np.angle(np.exp(1j * (ang - mean_ang))))
-    tol = float(np.clip(3.0 * np.percentile(spread, 90), math.radians(10.0), math.radians(20.0)))
-
-    def robust_var(x):
-        mad = float(np.median(np.abs(x - np.median(x))))
-        return (1.4826 * mad) ** 2 + 0.25
-
+    _, tol = learn_colour_model(prm, Y, U, V)
     st = tracker.yuv
-    prm[K.P.YM], prm[K.P.UM], prm[K.P.VM] = ym, um, vm
-    prm[K.P.DIR_U], prm[K.P.DIR_V] = (um - 128.0) / max(sat, 1e-9), (vm - 128.0) / max(sat, 1e-9)
-    prm[K.P.COS_TOL] = math.cos(tol)
-    prm[K.P.SAT_MIN] = max(6.0, 0.45 * sat)
     prm[K.P.AGREE] = AGREE
     if not rect:  # a rectangle's support is set by its shape (see _learn_rect)
         prm[K.P.RADIUS] = reach + margin_px + YUV_EXTRA_MARGIN_PX
@@ -193,10 +211,6 @@ def _learn_yuv(tracker: MarkerTracker, frame, m: Moments, margin_px: float) -> N
     prm[K.P.W_Y] = W_Y
     prm[K.P.ITER] = YUV_ITERATIONS
     prm[K.P.ENABLED] = 1.0
-    prm[K.P.VAR_Y] = robust_var(Y)
-    # A codec leaves a flat interior almost free of chroma noise while its chroma errors at the
-    # edges are larger: take at least the luma's noise for the chroma.
-    prm[K.P.VAR_C] = max(0.5 * (robust_var(U) + robust_var(V)), prm[K.P.VAR_Y])
     prm[K.P.ALPHA_LO], prm[K.P.ALPHA_HI] = ALPHA_RANGE
     prm[K.P.MIN_DEN] = 100.0
     st.tolerance_rad = tol
