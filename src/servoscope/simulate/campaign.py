@@ -502,12 +502,7 @@ def _truth(p: CampaignPreset, seed: int, camera, fps: Fraction, scene: Scene, te
     return {
         "preset": p.name,
         "seed": seed,
-        "model": {
-            "num": list(s.num), "den": list(s.den), "gain": s.gain if math.isfinite(s.gain) else None,
-            "natural_frequency_rad_s": s.natural_frequency_rad_s, "damping_ratio": s.damping_ratio,
-            "dead_time_s": s.dead_time_s, "input_quantization": s.input_quantization,
-            "rate_limit_per_s": s.rate_limit_per_s, "backlash": s.backlash,
-        },
+        "model": s.truth(),
         "bandwidth_rad_s": s.bandwidth_rad_s,
         "step": steps,
         "camera": camera.to_dict(),

@@ -201,12 +201,7 @@ def _truth(rp: RotorPreset, seed: int, fps: Fraction, tests: list[dict]) -> dict
     return {
         "preset": rp.name,
         "seed": seed,
-        "model": {
-            "num": list(s.num), "den": list(s.den), "gain": s.gain if math.isfinite(s.gain) else None,
-            "natural_frequency_rad_s": s.natural_frequency_rad_s, "damping_ratio": s.damping_ratio,
-            "dead_time_s": s.dead_time_s, "input_quantization": s.input_quantization,
-            "rate_limit_per_s": s.rate_limit_per_s, "backlash": s.backlash,
-        },
+        "model": s.truth(),
         "video": {"codec": "mraw" if p.monochrome else p.codec, "fps": float(fps),
                   "fps_rational": [fps.numerator, fps.denominator], "exposure_s": p.exposure_s,
                   "noise_sigma_dn": p.noise_sigma_dn, "width": p.width, "height": p.height,

@@ -251,6 +251,15 @@ class ServoModel:
         s = 1j * np.asarray(omega_rad_s, dtype=float)
         return np.abs(np.polyval(self.num, s) / np.polyval(self.den, s))
 
+    def truth(self) -> dict:
+        """The servo as truth.json states it (``model``): plain types, the gain None where infinite."""
+        return {
+            "num": list(self.num), "den": list(self.den), "gain": self.gain if math.isfinite(self.gain) else None,
+            "natural_frequency_rad_s": self.natural_frequency_rad_s, "damping_ratio": self.damping_ratio,
+            "dead_time_s": self.dead_time_s, "input_quantization": self.input_quantization,
+            "rate_limit_per_s": self.rate_limit_per_s, "backlash": self.backlash,
+        }
+
     @property
     def bandwidth_rad_s(self) -> float | None:
         """Lowest frequency at which |G(jω)| falls 3 dB below the DC gain.
