@@ -360,17 +360,25 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     failures: dict[str, str] = {}
     # Built aside and moved into place whole (the track cache, .cache, is written in place and kept).
     with staged_folder(out_dir, keep=(".cache",), last=("result.json",)) as stage:
+        tracks, rotor_progress = None, None
         with CampaignProgress(progress_enabled(quiet), manifest.tests) as progress:
-            tracks = track_campaign(
-                manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
-                workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache",
-                force=force,
-            )
+            if manifest.rotor is None:
+                tracks = track_campaign(
+                    manifest, keep_going=keep_going, failures=failures, progress=progress, on_done=progress.done,
+                    workers=None if workers == 0 else workers, scheduler=scheduler, cache_dir=out_dir / ".cache",
+                    force=force,
+                )
+            else:  # a turning rotor's videos are read pass by pass inside identify
+                rotor_progress = progress
+                result = run_identify(manifest, fit=fit_mode, order=order, bootstrap=bootstrap, keep_going=keep_going,
+                                      fix=fix or None, bounds=bounds or None, nonlinear=nonlinear, ties=ties or None,
+                                      self_calibrate_plane=self_calibrate_plane, progress=rotor_progress)
         if failures:
             manifest = manifest.without(failures)
-        result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap,
-                              keep_going=keep_going, fix=fix or None, bounds=bounds or None, nonlinear=nonlinear,
-                              ties=ties or None, self_calibrate_plane=self_calibrate_plane)
+        if rotor_progress is None:
+            result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap,
+                                  keep_going=keep_going, fix=fix or None, bounds=bounds or None, nonlinear=nonlinear,
+                                  ties=ties or None, self_calibrate_plane=self_calibrate_plane)
         write_report(result, stage)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))

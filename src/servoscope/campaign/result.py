@@ -32,6 +32,7 @@ from ..sysid.servo_sim import NONLINEAR_PARAMETER
 from ..sysid.dead_time import DeadTimeEstimate, dead_time_estimates
 from ..sysid.step import unit_step_function
 from ..sysid.sweep_result import SweepResponse
+from ..sysid.pass_result import PassSineFit
 from .headline import SOURCE_KEYS, TIME_DOMAIN_KEY, Headline, chosen_dead_time, headline
 from .manifest import Campaign, TestSpec
 from .recorded_input import recorded_input_entry, recorded_input_fields
@@ -149,6 +150,10 @@ class IdentificationResult:
     sweeps : mapping of label → SweepResponse
         Each frequency sweep's spectral response with coherence (:mod:`servoscope.campaign.sweeps`);
         its points with coherence ≥ 0.6 are in `frequency_response` beside the dwells'.
+    rotor : dict or None
+        A turning rotor's campaign (``[rotor]``, :mod:`servoscope.campaign.rotor`): its blades, rev/s
+        and passes per test, each blade's pitch offset from blade 0 pooled over the dwells with its
+        interval; its tracks' samples are the passes. None for a static blade.
     """
 
     campaign: Campaign
@@ -171,6 +176,7 @@ class IdentificationResult:
     view: ObliqueView | None = None
     plane: dict | None = None
     sweeps: Mapping[str, SweepResponse] = field(default_factory=dict)
+    rotor: dict | None = None
 
     def __post_init__(self) -> None:
         # Lists given (the runner's, a notebook's) kept as tuples, dicts as read-only views of a copy.
@@ -253,34 +259,7 @@ class IdentificationResult:
             p = head.parameters["dead_time_s"]
             dead_time[TIME_DOMAIN_KEY] = {"value_s": p.value, "stderr_s": p.stderr, "ci95_s": list(p.ci95),
                                           "shared_t0_stderr_s": None}
-        tests = []
-        for test in self.campaign.tests:
-            track = self.tracks[test.label]
-            entry = {
-                "label": test.label,
-                "video": test.video.name,
-                "kind": test.kind,
-                "frequency_hz": test.frequency_hz,
-                "amplitude": test.amplitude,
-                "frames": track.n_frames,
-                "valid_frames": track.n_valid,
-                "t0_s": input_start(test, track),
-                "t0_uncertainty_s": input_start_stderr(test, track),
-                "warnings": list(track.warnings),
-            }
-            if test.kind == "sweep":  # a recorded input's file, band and samples too
-                entry.update(from_hz=test.from_hz, to_hz=test.to_hz, duration_s=test.duration_s, shape=test.shape,
-                             **(recorded_input_entry(test) if test.recorded else {}))
-            pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
-            entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
-            if track.reference_angle_rad is not None:
-                # How much the airframe's reference line turned in this video (taken off the angle).
-                entry["reference_motion_rad"] = track.reference_motion()
-            fit = self.sine_fits.get(test.label)
-            if fit is not None:
-                entry["sine_fit"] = jsonable(fit.summary())
-                entry["warnings"] += list(fit.warnings)
-            tests.append(entry)
+        tests = [self._test_summary(test) for test in self.campaign.tests]
         return jsonable(
             {
                 "servoscope_version": package_version(),
@@ -306,6 +285,7 @@ class IdentificationResult:
                 **({"extra_markers": list(self.campaign.extra)} if self.campaign.extra else {}),
                 "frequency_response": self.frequency_response.summary(),
                 **({"sweeps": {k: v.summary() for k, v in self.sweeps.items()}} if self.sweeps else {}),
+                **({"rotor": self.rotor} if self.rotor is not None else {}),
                 "step": None if self.step is None else {"label": self.step_label, **self.step.summary(),
                                                         **self._step_fits()},
                 "tests": tests,
@@ -313,6 +293,35 @@ class IdentificationResult:
                 "warnings": list(self.warnings),
             }
         )
+
+    def _test_summary(self, test: TestSpec) -> dict:
+        """One test's entry in result.json's ``tests``."""
+        track = self.tracks[test.label]
+        entry = {
+            "label": test.label,
+            "video": test.video.name,
+            "kind": test.kind,
+            "frequency_hz": test.frequency_hz,
+            "amplitude": test.amplitude,
+            "frames": track.n_frames,
+            "valid_frames": track.n_valid,
+            "t0_s": input_start(test, track),
+            "t0_uncertainty_s": input_start_stderr(test, track),
+            "warnings": list(track.warnings),
+        }
+        if test.kind == "sweep":  # a recorded input's file, band and samples too
+            entry.update(from_hz=test.from_hz, to_hz=test.to_hz, duration_s=test.duration_s, shape=test.shape,
+                         **(recorded_input_entry(test) if test.recorded else {}))
+        pivot = pivot_motion(track.lead_xy_px, track.trail_xy_px, track.valid)
+        entry["pivot_motion_px"] = None if pivot is None else pivot.rms_px
+        if track.reference_angle_rad is not None:
+            # How much the airframe's reference line turned in this video (taken off the angle).
+            entry["reference_motion_rad"] = track.reference_motion()
+        fit = self.sine_fits.get(test.label)
+        if fit is not None:
+            entry["sine_fit"] = jsonable(fit.summary())
+            entry["warnings"] += list(fit.warnings)
+        return entry
 
     def _frequency_domain_summary(self, estimates: dict) -> dict:
         """The transfer-function fit's summary with the dead time its result states (the better estimate).
@@ -489,7 +498,8 @@ class IdentificationResult:
             if sf is not None:
                 lo, hi = sf["window_s"]
                 inside = track.valid & (track.angle_time_s >= lo) & (track.angle_time_s <= hi)
-                fits[label] = SineFit.from_summary(sf, time_s=track.angle_time_s[inside], y=track.angle_rad[inside])
+                kind = PassSineFit if "rotor" in sf else SineFit  # a turning rotor's dwell: its passes' fit
+                fits[label] = kind.from_summary(sf, time_s=track.angle_time_s[inside], y=track.angle_rad[inside])
         campaign = _loaded_campaign(data, tests, path, load_campaign)
         fr = FrequencyResponse.from_summary(data["frequency_response"])
         # Since issue 30 a nonlinear headline is `model` and the transfer function sits beside it.
@@ -527,7 +537,7 @@ class IdentificationResult:
             bending_response=[HeaveRow.from_summary(r) for r in data.get("bending_response", [])],
             heave_model=None if data.get("heave_model") is None else HeaveModel.from_summary(data["heave_model"]),
             view=None if data.get("view") is None else ObliqueView.from_summary(data["view"]),
-            plane=data.get("plane"),
+            plane=data.get("plane"), rotor=data.get("rotor"),
             sweeps={k: SweepResponse.from_summary(v) for k, v in (data.get("sweeps") or {}).items()})
 
     def plot(self, ax: Axes | None = None, *, phase_ax: Axes | None = None) -> list[Any]:

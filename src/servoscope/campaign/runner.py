@@ -8,6 +8,7 @@ notebook or a test can look at any of them.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, NamedTuple
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..angle.pivot import axis_moved
 from ..camera.exposure import ExposureEstimate, blur_evidence, estimate_exposure, pool_blur
+from ..errors import ServoscopeError
 from ..markers.settings import TrackerSettings
 from ..markers.track import Track
 from ..parameters import interval95
@@ -25,6 +27,7 @@ from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dw
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
+from .rotor import codec_warning, frequency_response_of, pass_track, rotor_dwell_fits, rotor_step, rotor_summary, track_rotor_campaign
 from .result import IdentificationResult
 from .step_test import step_test
 from .sweeps import combined_response, sweep_responses, sweeps_t0_stderr
@@ -380,6 +383,47 @@ def dead_time_warnings(model, step, shared_t0_s: float, exposure: ExposureEstima
     return out
 
 
+def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _Held, keep_going: bool,
+                    progress: ProgressFn | None, nonlinear: str, self_calibrate_plane: bool) -> IdentificationResult:
+    """A turning rotor's campaign (``[rotor]``): the videos read pass by pass, then the static steps."""
+    if nonlinear != "none":
+        raise ServoscopeError(f"{campaign.path}: --nonlinear is not built for a turning rotor's passes yet; "
+                              "identify it without (the linear model from the dwells)")
+    if self_calibrate_plane:
+        raise ServoscopeError(f"{campaign.path}: --self-calibrate-plane reads a static blade's stickers; a turning "
+                              "rotor's pitch is read at each pass (docs/rotor.md)")
+    failures: dict[str, str] = {}
+    tables = track_rotor_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress)
+    warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in failures.items()]
+    lossy = codec_warning(campaign)
+    if lossy:
+        warnings.append(lossy)
+    tracks = {label: pass_track(table, str(campaign_test.video)) for campaign_test in campaign.tests
+              for label, table in tables.items() if label == campaign_test.label}
+    shared_t0_s, own_t0_stderr = shared_t0_stderr([t for t in campaign.sine_tests if t.label in tracks], tracks)
+    for label, table in tables.items():
+        own = own_t0_stderr.get(label)
+        if own is not None:
+            tables[label] = replace(table, t0_uncertainty_s=own)
+    fits = rotor_dwell_fits(campaign, tables, warnings)
+    if len(fits) < 3:
+        raise ServoscopeError(f"{campaign.path}: only {len(fits)} dwell(s) could be fitted to the rotor's passes; "
+                              f"identify fits a model to 3 or more frequencies (the warnings say why each was left out)")
+    # The shutter as given (a rotor's is short: 1/40,000 s takes 0.002 % off a 14 Hz dwell); passes show no blur
+    # evidence a static track would.
+    exposure = estimate_exposure([], campaign.exposure_s, None)
+    fr = exposure_corrected(campaign, frequency_response_of(fits, campaign), exposure)
+    model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, None)
+    warnings.extend(fr.warnings)
+    warnings.extend(w for w in model.warnings if w not in warnings)
+    step, step_label = rotor_step(campaign, tables, model, warnings)
+    warnings.extend(dead_time_warnings(model, step, shared_t0_s, exposure))
+    return IdentificationResult(
+        campaign=campaign, tracks=tracks, sine_fits=fits, frequency_response=fr, model=model, step=step,
+        step_label=step_label, warnings=warnings, exposure=exposure, shared_t0_stderr_s=shared_t0_s,
+        rotor=rotor_summary(campaign, tables, fits))
+
+
 def identify(
     campaign: Campaign | str | Path,
     *,
@@ -453,6 +497,9 @@ def identify(
     if not isinstance(order, str):
         order = tuple(order)  # (0, 2) or [0, 2] alike
     held = checked_holds(campaign, order, nonlinear, fix, bounds, ties)
+    if campaign.rotor is not None:
+        return _identify_rotor(campaign, fit, order, bootstrap, held, keep_going, progress, nonlinear,
+                               self_calibrate_plane)
     if tracks is None:
         campaign, tracks = _tracked(campaign, keep_going, progress, track_options)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in campaign.skipped]

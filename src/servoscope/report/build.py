@@ -13,6 +13,7 @@ from .figures import (amplitude_figure, bode_figure, candidate_traces_figure, de
 from .html import ReportSection, render_html
 from .blade_section import blade_section
 from .plane_section import plane_section
+from .rotor_section import rotor_section
 from .sweep_section import sweep_section
 from ..campaign.headline import SOURCE_KEYS
 from ..numbers import format_interval, format_value, format_with_uncertainty
@@ -110,6 +111,7 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         model_section(result, summary, figures_dir),
         frequency_response_section(result, figures_dir),
         sweep_section(result, figures_dir),
+        rotor_section(result, figures_dir),
         plane_section(result, figures_dir),
         blade_section(result, figures_dir) if result.modes or result.heave_response or result.bending_response
         else None,
