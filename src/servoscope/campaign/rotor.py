@@ -29,7 +29,7 @@ from ..sysid.pass_sine import fit_pass_sine
 from ..sysid.pass_step import analyse_pass_step
 from .manifest import Campaign, TestSpec
 
-__all__ = ["codec_warning", "pass_track", "rotor_dwell_fits", "rotor_step", "rotor_summary", "track_rotor_campaign"]
+__all__ = ["blades_by_colour", "codec_warning", "pass_track", "rotor_dwell_fits", "rotor_step", "rotor_summary", "track_rotor_campaign"]
 
 
 def pass_track(table: PassTable, video: str) -> Track:
@@ -143,14 +143,32 @@ def codec_warning(campaign: Campaign) -> str | None:
             f"(docs/rotor.md); a high-speed camera's raw or monochrome file does not (0.1-0.9 %)")
 
 
+def blades_by_colour(campaign: Campaign) -> bool:
+    """Whether each blade has its own colours (else, on a monochrome camera's footage, the blades are told apart
+    by their order in each video: blade 0 is that video's first seen, not the same blade in every video)."""
+    return len(set(campaign.rotor.blades)) == len(campaign.rotor.blades) and not any(
+        "bright" in pair for pair in campaign.rotor.blades)
+
+
 def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) -> dict:
-    """result.json's ``rotor``: blades, rev/s per test, each blade's pitch offset from blade 0 pooled over the
-    dwells (inverse-variance mean of each dwell's difference, its error the larger of the pooled one and the
-    dwells' scatter about it), with its 95 % interval."""
-    tests = [{"label": label, "rev_per_s": float(t.rev_per_s), "rev_per_s_stderr": float(t.rev_per_s_stderr),
-              "passes": int(len(t.time_s))} for label, t in tables.items()]
+    """result.json's ``rotor``.
+
+    Its blades (``identified_by``: "colour" or "order"), each test's rev/s and passes and each dwell's
+    blade-to-blade differences, and, where the blades are known by their colours, each blade's pitch
+    against blade 0's pooled over the dwells (inverse-variance mean, its error the larger of the pooled
+    one and the dwells' scatter about it, a Student-t interval). Blades known only by their order are
+    not pooled: blade 0 may be a different blade in each video.
+    """
+    tests = []
+    for label, t in tables.items():
+        entry = {"label": label, "rev_per_s": float(t.rev_per_s), "rev_per_s_stderr": float(t.rev_per_s_stderr),
+                 "passes": int(len(t.time_s))}
+        if label in fits:
+            entry["blade_differences"] = [d.summary() for d in fits[label].blade_differences]
+        tests.append(entry)
+    by_colour = blades_by_colour(campaign)
     differences = []
-    for blade in range(1, len(campaign.rotor.blades)):
+    for blade in range(1, len(campaign.rotor.blades)) if by_colour else ():
         values, errors = [], []
         for fit in fits.values():
             for d in fit.blade_differences:
@@ -171,7 +189,8 @@ def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) 
         differences.append({"blade": blade, "reference_blade": 0, "difference_rad": mean,
                             "difference_stderr_rad": stderr, "ci95_rad": [float(ci[0]), float(ci[1])],
                             "dwells": len(v)})
-    return {"blades": [list(b) for b in campaign.rotor.blades], "tests": tests, "blade_differences": differences}
+    return {"blades": [list(b) for b in campaign.rotor.blades], "identified_by": "colour" if by_colour else "order",
+            "tests": tests, "blade_differences": differences}
 
 
 def frequency_response_of(fits: dict, campaign: Campaign) -> FrequencyResponse:

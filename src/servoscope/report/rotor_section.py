@@ -76,7 +76,16 @@ def rotor_section(result: "IdentificationResult", figures_dir: Path | None) -> R
     s.table(["test", "rotor speed (rev/s)", "passes"],
             [[t["label"], f"{t['rev_per_s']:.5f} ± {t['rev_per_s_stderr']:.1g}", t["passes"]] for t in rotor["tests"]])
     if rotor["blade_differences"]:
+        s.text("Each blade's pitch against blade 0's (its rigging), pooled over the dwells:")
         s.table(["blade", "pitch − blade 0's (°)", "95 % interval (°)", "dwells"],
                 [[d["blade"], _deg(d["difference_rad"]), f"[{_deg(d['ci95_rad'][0])}, {_deg(d['ci95_rad'][1])}]",
                   d["dwells"]] for d in rotor["blade_differences"]])
+    rows = [[t["label"], d["blade"], _deg(d["difference_rad"]), f"[{_deg(d['ci95_rad'][0])}, {_deg(d['ci95_rad'][1])}]"]
+            for t in rotor["tests"] for d in t.get("blade_differences", [])]
+    if rows and rotor.get("identified_by") == "order":
+        s.text("The blades look alike here (a monochrome camera's bright stickers): each video numbers them in the "
+               "order they pass first, so blade 0 may be a different blade in each video, and the differences are "
+               "not pooled. Give each blade its own colours to follow one blade through the campaign.")
+    if rows:
+        s.table(["dwell", "blade", "pitch − blade 0's (°)", "95 % interval (°)"], rows)
     return s
