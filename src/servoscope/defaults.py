@@ -105,3 +105,10 @@ STEP_DISCERNIBLE_SIGMA = 10.0
 #: square is a 1 % foreshortening.
 OBLIQUE_VIEW_WARNING_DEG = 8.0
 OBLIQUE_GAIN_WARNING = 0.005
+
+# -- a turning rotor (issue 33) ----------------------------------------------------------------------------
+#: Each blade's (lead, trail) sticker colours, blade 0 first, where campaign.toml's [rotor] or the plan names
+#: none: blade 0 the static stickers' (tab:red, tab:green), blade 1 blue and magenta, blade 2 cyan and
+#: orange: saturated hues at least 28° apart from each other and from the LED's yellow (the twin's too).
+ROTOR_BLADE_COLOURS: tuple[tuple[str, str], ...] = ((LEAD_COLOUR, TRAIL_COLOUR), ("#1d4fd8", "#c81dd8"),
+                                                    ("#17becf", "#ff7f0e"))

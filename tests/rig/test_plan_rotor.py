@@ -80,3 +80,31 @@ def test_a_static_plan_is_unchanged():
     rotor = plan_rotor_sweep(100, 20.0, 2, points=14)
     assert rotor.rotor["pass_nyquist_hz"] == 20.0 and rotor.rotor["n_blades"] == 2
     assert [d.frequency_hz for d in rotor.dwells] == [d.frequency_hz for d in plan_sweep(100, 0.5, 14.0).dwells]
+
+
+def test_the_plan_writes_the_rotor_and_reads_it_back(tmp_path):
+    from servoscope.campaign import Campaign
+    from servoscope.defaults import ROTOR_BLADE_COLOURS
+
+    out = tmp_path / "plan.toml"
+    result = CliRunner().invoke(plan_command, ["--fps", "4000", "--rotor-hz", "20", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    campaign = Campaign.load(out, planned=True)
+    assert campaign.rotor.blades == ROTOR_BLADE_COLOURS[:2] and campaign.rotor.rev_per_s == 20.0
+    plan = read_plan(out)
+    assert plan.rotor["n_blades"] == 2 and plan.rotor["pass_nyquist_hz"] == 20.0
+    # Four blades with their own colours; four without are one clear error, and no file.
+    colours = "#ff0000/#00ff00,#0000ff/#ff00ff,#00ffff/#ffff00,#ff8800/#8800ff"
+    four = tmp_path / "four.toml"
+    result = CliRunner().invoke(plan_command, ["--fps", "5000", "--rotor-hz", "20", "--blade-colours", colours,
+                                               "--out", str(four)])
+    assert result.exit_code == 0, result.output
+    assert [b[0] for b in Campaign.load(four, planned=True).rotor.blades] == ["#ff0000", "#0000ff", "#00ffff",
+                                                                             "#ff8800"]
+    assert read_plan(four).rotor["pass_nyquist_hz"] == 40.0
+    bad = tmp_path / "bad.toml"
+    result = CliRunner().invoke(plan_command, ["--fps", "5000", "--rotor-hz", "20", "--blades", "4", "--out", str(bad)])
+    assert result.exit_code != 0 and "--blade-colours" in str(result.exception or result.output)
+    assert not bad.exists()
+    result = CliRunner().invoke(plan_command, ["--fps", "5000", "--blade-colours", "#ff0000/#00ff00", "--out", str(bad)])
+    assert result.exit_code != 0 and "--rotor-hz" in str(result.exception or result.output)

@@ -514,6 +514,15 @@ class RotorSpec:
     camera_distance_m: float | None = None
     tip_radius_m: float | None = None
 
+    def plan_rotor(self) -> dict:
+        """The rig plan's ``rotor`` (:class:`~servoscope.rig.plan.SweepPlan`) from this section: empty without a
+        speed; else the speed, the blades (their colours) and the passes' rate and Nyquist frequency."""
+        if self.rev_per_s is None:
+            return {}
+        n, rev = len(self.blades), float(self.rev_per_s)
+        return {"rev_per_s": rev, "n_blades": n, "pass_rate_hz": n * rev, "pass_nyquist_hz": 0.5 * n * rev,
+                "blades": [list(b) for b in self.blades]}
+
 
 def _rotor_blade(problems: Problems, i: int, entry) -> tuple[str, str] | None:
     """``[rotor] blades[i]``: ``{lead = "#…", trail = "#…"}``, each a colour (or a brightness); None when bad."""

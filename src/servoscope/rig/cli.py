@@ -63,12 +63,14 @@ __all__ = ["plan", "drive"]
               help="A turning rotor, rev/s: its blades' pitch is read once a revolution each, so the dwells stay "
                    "below the passes' Nyquist frequency (blades × rev/s / 2); --to defaults to 70 % of it.")
 @click.option("--blades", "n_blades", type=int, help="Blades on the rotor (with --rotor-hz; default 2).")
+@click.option("--blade-colours", "blade_colours", help="Each blade's sticker colours, blade 0 first, as "
+              "LEAD/TRAIL,LEAD/TRAIL (with --rotor-hz; default the twin's: red/green, blue/magenta, cyan/orange).")
 def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float, periods: float,
          min_seconds: float, settle_s: float, update_hz: float, step: bool, step_amplitude: float,
          step_seconds: float, lead_in_s: float, tail_s: float, rest_s: float, lead: str, trail: str,
          led: str, units: str, out: Path, amplitudes_text: str | None, sweep_text: str | None,
          duration_s: float | None, sweep_shape: str, noise_deg: float, record_s: float | None,
-         rotor_hz: float | None = None, n_blades: int | None = None) -> None:
+         rotor_hz: float | None = None, n_blades: int | None = None, blade_colours: str | None = None) -> None:
     """Plan the tests and write a campaign.toml without videos.
 
     Log-spaced sine dwells (--from, --to, --points), or one frequency sweep
@@ -93,6 +95,8 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
     for option, colour in (("--lead", lead), ("--trail", trail), ("--led", led)):
         parse_colour(colour, what=option)
     markers = {"lead": lead, "trail": trail, "led": led}
+    if blade_colours is not None and rotor_hz is None:
+        raise ServoscopeError("--blade-colours goes with --rotor-hz (a turning rotor's speed, rev/s)")
     if n_blades is not None and rotor_hz is None:
         raise ServoscopeError("--blades goes with --rotor-hz (a turning rotor's speed, rev/s)")
     if rotor_hz is not None and sweep_text is not None:
@@ -103,10 +107,11 @@ def plan(fps: float, from_hz: float, to_hz: float, points: int, amplitude: float
         if duration_s is not None or record_s is not None:
             raise ServoscopeError("--duration and --record-seconds go with --sweep")
         sweep = plan_rotor_sweep(
-            fps, rotor_hz, 2 if n_blades is None else n_blades, from_hz=from_hz, to_hz=to_hz, points=points,
+            fps, rotor_hz, n_blades, from_hz=from_hz, to_hz=to_hz, points=points,
             amplitude=amplitude, periods=periods, min_seconds=min_seconds, settle_s=settle_s, update_hz=update_hz, step=step,
             step_amplitude=step_amplitude, step_seconds=step_seconds, lead_in_s=lead_in_s, tail_s=tail_s,
             rest_s=rest_s, markers=markers, units=units, amplitudes=amplitudes,
+            blades=blade_colours,
         )
     elif sweep_text is not None:
         if from_hz is not None or to_hz is not None or amplitudes is not None:

@@ -491,9 +491,12 @@ def plan_campaign(plan: SweepPlan, path: str | Path = "campaign.toml", *, includ
             "amplitude": float(d.amplitude), **_sweep_keys(d)}.items() if v is not None} for d in plan.dwells],
         "plan": _plan_table(plan),
     })
-    # Issue 33: a rotor's plan (plan.rotor: rev_per_s, n_blades) belongs in campaign.toml's [rotor]
-    # section, whose reader and writer are the campaign's (Campaign.rotor); until they take it,
-    # the plan's dwells (below the passes' Nyquist frequency) are all it writes of the rotor.
+    if plan.rotor:  # a turning rotor's plan: campaign.toml's [rotor], each blade's colours and the speed
+        if not plan.rotor.get("blades"):
+            raise ServoscopeError(f"a rotor of {plan.rotor['n_blades']} blades: name each blade's colours "
+                                  "(--blade-colours LEAD/TRAIL,LEAD/TRAIL,...), the defaults have 3")
+        data["rotor"] = {"blades": [{"lead": a, "trail": b} for a, b in plan.rotor["blades"]],
+                         "rev_per_s": float(plan.rotor["rev_per_s"])}
     campaign = campaign_from_data(data, Path(path), check_videos=False, planned=True, read_files=False)
     return campaign if include_plan else replace(campaign, plan={})
 
@@ -581,6 +584,7 @@ def read_plan(path: str | Path) -> SweepPlan:
         markers={k: v for k, v in markers_table(campaign).items() if v is not None},
         camera={k: v for k, v in camera_table(campaign).items() if v is not None},
         drive=dict(plan_t.get("drive", {})), settle_auto=auto,
+        rotor={} if campaign.rotor is None else campaign.rotor.plan_rotor(),
     )
 
 

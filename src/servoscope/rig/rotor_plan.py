@@ -19,10 +19,11 @@ from dataclasses import replace
 from typing import Any
 
 from ..errors import ServoscopeError
+from ..defaults import ROTOR_BLADE_COLOURS
 from ..sysid.pass_sine import pass_nyquist_hz, rotor_harmonic_warning
 from .plan import SweepPlan, plan_sweep, positive_option
 
-__all__ = ["ROTOR_TOP_FRACTION", "plan_rotor_sweep", "rotor_lines", "rotor_top_hz"]
+__all__ = ["ROTOR_TOP_FRACTION", "parse_blade_colours", "plan_rotor_sweep", "rotor_lines", "rotor_top_hz"]
 
 #: The highest dwell a rotor's plan reaches, as a share of the pass-rate Nyquist frequency.
 ROTOR_TOP_FRACTION = 0.7
@@ -35,8 +36,34 @@ def rotor_top_hz(rev_per_s: float, n_blades: int) -> float:
     return math.floor(top * 10**digits + 1e-9) / 10**digits
 
 
-def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int, *, from_hz: float | None = None,
-                     to_hz: float | None = None, **options: Any) -> SweepPlan:
+def parse_blade_colours(text: str) -> list[tuple[str, str]]:
+    """``--blade-colours "LEAD/TRAIL,LEAD/TRAIL"``: each blade's (lead, trail) colours, blade 0 first, checked."""
+    from ..markers.colour import parse_colour
+
+    pairs = [tuple(c.strip() for c in pair.split("/")) for pair in text.split(",")]
+    if any(len(p) != 2 for p in pairs):
+        raise ServoscopeError(f"--blade-colours {text!r}: give LEAD/TRAIL for each blade, e.g. "
+                              "'#d62728/#2ca02c,#1d4fd8/#c81dd8'")
+    for k, (lead, trail) in enumerate(pairs):
+        parse_colour(lead, what=f"--blade-colours (blade {k} lead)")
+        parse_colour(trail, what=f"--blade-colours (blade {k} trail)")
+    return pairs
+
+
+def _blade_colours(n_blades: int, blades: list[tuple[str, str]] | None) -> list[list[str]] | None:
+    """Each blade's colours: those given (one pair a blade), else the defaults' (None past their 3 blades: the
+    plan can be made, not written, until they are named)."""
+    if blades is not None and len(blades) != n_blades:
+        raise ServoscopeError(f"a rotor of {n_blades} blades needs {n_blades} colour pairs in --blade-colours, "
+                              f"not {len(blades)}")
+    if blades is None and n_blades > len(ROTOR_BLADE_COLOURS):
+        return None
+    return [list(b) for b in (blades if blades is not None else ROTOR_BLADE_COLOURS[:n_blades])]
+
+
+def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int | None = None, *, from_hz: float | None = None,
+                     to_hz: float | None = None, blades: str | list[tuple[str, str]] | None = None,
+                     **options: Any) -> SweepPlan:
     """Plan sine dwells (and the step) below a turning rotor's pass-rate Nyquist frequency.
 
     Parameters
@@ -45,13 +72,17 @@ def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int, *, from_hz: fl
         Camera frame rate, frames/s (a high-speed camera's; the frame-rate checks still run).
     rev_per_s : float
         Rotor speed Ω, rev/s.
-    n_blades : int
-        Blades N (each read once a revolution).
+    n_blades : int, optional
+        Blades N (each read once a revolution); default as many as ``blades`` names, else 2.
     from_hz : float, optional
         Lowest dwell, Hz; default 0.5 Hz (the paper's), or the top when that is lower.
     to_hz : float, optional
         Highest dwell, Hz; default, and at most, :func:`rotor_top_hz` (a higher one is lowered
         to it, and the plan's ``rotor["notes"]`` say so).
+    blades : str or list of (str, str), optional
+        Each blade's (lead, trail) sticker colours, blade 0 first (or ``--blade-colours``' text,
+        :func:`parse_blade_colours`); default :data:`~servoscope.defaults.ROTOR_BLADE_COLOURS`
+        (3 blades; more must be named before the plan is written).
     **options
         The other keywords of :func:`~servoscope.rig.plan.plan_sweep` (points, amplitude, …).
 
@@ -59,7 +90,8 @@ def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int, *, from_hz: fl
     -------
     SweepPlan
         Its ``rotor`` holds ``rev_per_s``, ``n_blades``, ``pass_rate_hz``, ``pass_nyquist_hz``,
-        ``top_hz`` and ``notes``; each dwell near a rotor harmonic carries a warning.
+        ``top_hz``, ``notes`` and ``blades`` (written as campaign.toml's ``[rotor]``); each dwell
+        near a rotor harmonic carries a warning.
 
     Raises
     ------
@@ -67,9 +99,14 @@ def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int, *, from_hz: fl
         A speed or a blade count out of range, or a lowest dwell above the top.
     """
     rev = positive_option(rev_per_s, "--rotor-hz")
+    if isinstance(blades, str):
+        blades = parse_blade_colours(blades)
+    if n_blades is None:
+        n_blades = 2 if blades is None else len(blades)
     if int(n_blades) != n_blades or n_blades < 1:
         raise ServoscopeError(f"--blades {n_blades}: must be a whole number ≥ 1")
     n_blades = int(n_blades)
+    colours = _blade_colours(n_blades, blades)
     nyq = pass_nyquist_hz(rev, n_blades)
     top = rotor_top_hz(rev, n_blades)
     notes = []
@@ -93,7 +130,7 @@ def plan_rotor_sweep(fps: float, rev_per_s: float, n_blades: int, *, from_hz: fl
                 d = replace(d, warnings=(*d.warnings, extra))
         dwells.append(d)
     rotor = {"rev_per_s": rev, "n_blades": n_blades, "pass_rate_hz": 2.0 * nyq, "pass_nyquist_hz": nyq,
-             "top_hz": top, "notes": tuple(notes)}
+             "top_hz": top, "notes": tuple(notes), "blades": colours}
     return replace(plan, dwells=tuple(dwells), rotor=rotor)
 
 

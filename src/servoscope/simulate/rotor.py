@@ -30,17 +30,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..defaults import LEAD_COLOUR, TRAIL_COLOUR
+from ..defaults import ROTOR_BLADE_COLOURS
 from ..errors import ServoscopeError
 
 __all__ = ["ROTOR_BLADE_COLOURS", "RotorRig", "rotor_passes"]
-
-#: Each blade's (lead, trail) sticker colours, blade 0 first: blade 0 has the static stickers'
-#: (tab:red, tab:green), blade 1 blue and magenta, blade 2 cyan and orange: saturated hues at
-#: least 28° apart from each other and from the LED's yellow, none near the blue-grey background.
-ROTOR_BLADE_COLOURS: tuple[tuple[str, str], ...] = ((LEAD_COLOUR, TRAIL_COLOUR), ("#1d4fd8", "#c81dd8"),
-                                                    ("#17becf", "#ff7f0e"))
-
 
 @dataclass(frozen=True)
 class RotorRig:
