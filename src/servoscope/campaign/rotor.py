@@ -95,7 +95,8 @@ def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings:
         try:
             fit = fit_pass_sine(table.time_s, table.blade, table.pitch_rad, table.pitch_stderr_rad,
                                 test.frequency_hz, t0_s=t0, settle_s=campaign.settle_s,
-                                rev_per_s=campaign.rotor.rev_per_s or table.rev_per_s, n_blades=n_blades,
+                                # measured: [rotor] rev_per_s is the planned one (the tracker falls back on it)
+                                rev_per_s=table.rev_per_s, n_blades=n_blades,
                                 t0_stderr_s=table.t0_uncertainty_s if test.t0_s is None else 0.0)
         except ServoscopeError as exc:
             warnings.append(f"{test.label}: dwell left out: {exc}")

@@ -21,7 +21,10 @@ Modules, each importing only those below it:
   ``_tf_data``, residuals and minimizer ``_tf_minimize``, ``_tf_metrics``, ``_tf_build``,
   resampling ``_tf_resample``, one order's fit ``_fixed_order``; then ``order`` (select_order)
   and, on top, ``tf_fit`` (fit_transfer_function, whose ``order="auto"`` calls select_order);
-* step tests: ``step`` (analyse_step); the dead time's two estimates ``dead_time``.
+* step tests: ``step`` (analyse_step); the dead time's two estimates ``dead_time``;
+* a turning rotor's passes (one irregular sample a blade a revolution, issue 33): ``pass_result``
+  (PassSineFit, BladeOffset, BladeDifference), ``pass_sine`` (fit_pass_sine, one offset a blade),
+  ``pass_step`` (analyse_pass_step); ``FrequencyResponse.from_sine_fits`` takes PassSineFits.
 
 Every fit's parameters are :class:`~servoscope.parameters.Parameter` objects gathered in a
 :class:`~servoscope.parameters.Parameters` (``result.parameters``), and every result offers
@@ -34,6 +37,9 @@ from servoscope.sysid.dead_time import DeadTimeEstimate, dead_time_estimates
 from servoscope.sysid._tf_resample import with_gain_scale_uncertainty
 from servoscope.sysid.frequency_response import FrequencyResponse
 from servoscope.sysid.linearity import AmplitudeCheck, gain_against_amplitude
+from servoscope.sysid.pass_result import BladeDifference, BladeOffset, PassSineFit
+from servoscope.sysid.pass_sine import fit_pass_sine, pass_nyquist_hz, rev_per_s_from_passes
+from servoscope.sysid.pass_step import PassStepAnalysis, analyse_pass_step
 from servoscope.sysid.order import OrderSelection, estimate_slope_db_per_decade, select_order
 from servoscope.sysid.sine import SineFit, fit_sine, hac_covariance, rigid_motion_null
 from servoscope.sysid.step import StepAnalysis, analyse_step, model_step_metrics
@@ -48,22 +54,28 @@ from servoscope.sysid.tf_fit import (
 
 __all__ = [
     "AmplitudeCheck",
+    "BladeDifference",
+    "BladeOffset",
     "DeadTimeEstimate",
     "FitResult",
     "FrequencyResponse",
     "OrderSelection",
+    "PassSineFit",
+    "PassStepAnalysis",
     "Parameter",
     "Parameters",
     "SineFit",
     "StepAnalysis",
     "SweepResponse",
     "TransferFunctionFit",
+    "analyse_pass_step",
     "analyse_step",
     "bandwidth_rad_s",
     "check_held",
     "cifer_cost",
     "dead_time_estimates",
     "estimate_slope_db_per_decade",
+    "fit_pass_sine",
     "fit_second_order",
     "fit_sine",
     "fit_transfer_function",
@@ -71,6 +83,8 @@ __all__ = [
     "hac_covariance",
     "interval95",
     "model_step_metrics",
+    "pass_nyquist_hz",
+    "rev_per_s_from_passes",
     "rigid_motion_null",
     "select_order",
     "sweep_response",
