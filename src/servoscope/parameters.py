@@ -47,7 +47,8 @@ from .errors import ServoscopeError
 from .numbers import format_interval, format_value, format_with_uncertainty
 from .results import html_rows, import_pandas, jsonable
 
-__all__ = ["INTERVAL_KINDS", "FitResult", "Parameter", "Parameters", "check_held", "interval95", "stderr_of_interval",
+__all__ = ["INTERVAL_KINDS", "FitResult", "Parameter", "Parameters", "check_held", "interval95", "inverse_variance_mean",
+           "stderr_of_interval",
            "Tie", "tie_names", "unit_of"]
 
 #: How a 95 % interval can be made (see the module's description).
@@ -70,6 +71,23 @@ def unit_of(name: str) -> str:
         if name.endswith(suffix):
             return unit
     return ""
+
+
+def inverse_variance_mean(values, stderrs) -> tuple[float, float]:
+    """Several estimates of one quantity pooled: their inverse-variance mean and its standard error.
+
+    Where the estimates disagree beyond their errors (χ² over its n − 1 degrees of freedom above 1),
+    the error is widened by its square root (the Birge ratio), so that it never claims more than the
+    estimates' own scatter supports.
+    """
+    v = np.asarray(values, dtype=float)
+    w = 1.0 / np.asarray(stderrs, dtype=float) ** 2
+    mean = float(np.sum(w * v) / np.sum(w))
+    stderr = math.sqrt(1.0 / float(np.sum(w)))
+    if v.size > 1:
+        chi2 = float(np.sum(w * (v - mean) ** 2)) / (v.size - 1)
+        stderr *= math.sqrt(max(chi2, 1.0))
+    return mean, stderr
 
 
 def interval95(value: float, stderr: float, kind: IntervalKind = "normal", *,

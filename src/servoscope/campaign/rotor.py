@@ -22,9 +22,8 @@ from ..angle.pass_table import PassTable
 from ..errors import ServoscopeError
 from ..markers.settings import TrackerSettings
 from ..markers.track import Track
-from ..parameters import interval95
+from ..parameters import interval95, inverse_variance_mean
 from ..pipeline.rotor import track_passes
-from ..sysid import FrequencyResponse
 from ..sysid.pass_sine import fit_pass_sine
 from ..sysid.pass_step import analyse_pass_step
 from .manifest import Campaign, TestSpec
@@ -179,28 +178,11 @@ def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) 
                     errors.append(d.difference_stderr_rad)
         if not values:
             continue
-        v, e = np.asarray(values), np.asarray(errors)
-        w = 1.0 / e**2
-        mean = float(np.sum(w * v) / np.sum(w))
-        stderr = float(math.sqrt(1.0 / np.sum(w)))
-        if len(v) > 1:  # the dwells' own scatter, where it says more than their stated errors
-            chi2 = float(np.sum(w * (v - mean) ** 2) / (len(v) - 1))
-            stderr *= math.sqrt(max(chi2, 1.0))
-        ci = interval95(mean, stderr, "student", dof=len(v) - 1) if len(v) > 1 else interval95(mean, stderr)
+        mean, stderr = inverse_variance_mean(values, errors)  # the dwells' scatter widens it where larger
+        n = len(values)
+        ci = interval95(mean, stderr, "student", dof=n - 1) if n > 1 else interval95(mean, stderr)
         differences.append({"blade": blade, "reference_blade": 0, "difference_rad": mean,
                             "difference_stderr_rad": stderr, "ci95_rad": [float(ci[0]), float(ci[1])],
-                            "dwells": len(v)})
+                            "dwells": n})
     return {"blades": [list(b) for b in campaign.rotor.blades], "identified_by": "colour" if by_colour else "order",
             "tests": tests, "blade_differences": differences}
-
-
-def frequency_response_of(fits: dict, campaign: Campaign) -> FrequencyResponse:
-    """The dwells' frequency response (output per input unit), by label, from their pass fits."""
-    amplitude = {t.label: t.amplitude for t in campaign.tests}
-    amplitudes = np.asarray([amplitude[label] for label in fits])
-    return FrequencyResponse.from_sine_fits(list(fits.values()), amplitudes, list(fits))
-
-
-def rotor_videos(campaign: Campaign) -> dict[str, Path]:
-    """Each test's video, by label."""
-    return {t.label: t.video for t in campaign.tests}

@@ -27,7 +27,7 @@ from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dw
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
-from .rotor import codec_warning, frequency_response_of, pass_track, rotor_dwell_fits, rotor_step, rotor_summary, track_rotor_campaign
+from .rotor import codec_warning, pass_track, rotor_dwell_fits, rotor_step, rotor_summary, track_rotor_campaign
 from .result import IdentificationResult
 from .step_test import step_test
 from .sweeps import combined_response, sweep_responses, sweeps_t0_stderr
@@ -398,8 +398,8 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     lossy = codec_warning(campaign)
     if lossy:
         warnings.append(lossy)
-    tracks = {label: pass_track(table, str(campaign_test.video)) for campaign_test in campaign.tests
-              for label, table in tables.items() if label == campaign_test.label}
+    video = {t.label: t.video for t in campaign.tests}
+    tracks = {label: pass_track(table, str(video[label])) for label, table in tables.items()}
     shared_t0_s, own_t0_stderr = shared_t0_stderr([t for t in campaign.sine_tests if t.label in tracks], tracks)
     for label, table in tables.items():
         own = own_t0_stderr.get(label)
@@ -412,7 +412,8 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     # The shutter as given (a rotor's is short: 1/40,000 s takes 0.002 % off a 14 Hz dwell); passes show no blur
     # evidence a static track would.
     exposure = estimate_exposure([], campaign.exposure_s, None)
-    fr = exposure_corrected(campaign, frequency_response_of(fits, campaign), exposure)
+    amplitude = {t.label: t.amplitude for t in campaign.sine_tests}
+    fr = dwell_response(campaign, fits, [amplitude[label] for label in fits], exposure)
     model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, None)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit
 
-from servoscope.parameters import FitResult, Parameter, Parameters, interval95
+from servoscope.parameters import FitResult, Parameter, Parameters, interval95, inverse_variance_mean
 from servoscope.results import jsonable
 
 from .hac import hac_covariance
@@ -459,12 +459,7 @@ def pool_modes(modes: list[ModeFit], source: str) -> ModeFit | None:
         v = np.array([value_of(m) for m in modes], dtype=float)
         se = np.array([se_of(m) for m in modes], dtype=float)
         stat = np.sqrt(np.maximum(se**2 - (MODE_SYSTEMATIC[key] * v) ** 2, (1e-3 * se) ** 2))
-        w = 1.0 / stat**2
-        mean = float(np.sum(w * v) / np.sum(w))
-        pooled = math.sqrt(1.0 / float(np.sum(w)))
-        if v.size > 1:
-            chi2 = float(np.sum(w * (v - mean) ** 2)) / (v.size - 1)
-            pooled *= math.sqrt(max(chi2, 1.0))
+        mean, pooled = inverse_variance_mean(v, stat)
         out[key] = (mean, math.hypot(pooled, MODE_SYSTEMATIC[key] * mean))
     amplitude = max(m.amplitude for m in modes)
     return ModeFit(out["frequency"][0], out["frequency"][1], out["damping"][0], out["damping"][1], amplitude, source)
