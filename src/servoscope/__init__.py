@@ -29,6 +29,8 @@ _EXPORTS = {
     "Campaign": "servoscope.campaign",
     "IdentificationResult": "servoscope.campaign",
     "identify": "servoscope.campaign",
+    "compare_results": "servoscope.campaign",
+    "ResultComparison": "servoscope.campaign",
     "load_campaign": "servoscope.campaign",
     "track_campaign": "servoscope.campaign",
     "write_report": "servoscope.report",

@@ -336,9 +336,14 @@ def markers(video: Path, frame_index: int, out_png: Path | None, **source) -> No
               help="Without [camera] plane: correct the angles for the camera's view as the stickers tell "
                    "them (shapes and sizes: round or square stickers of one size), the gain's interval widened by its "
                    "uncertainty.")
+@click.option("--beside", "beside", type=click.Path(path_type=Path), metavar="STATIC_OUT/result.json",
+              help="A turning rotor's campaign: the same servo's static identification (the result.json, or its "
+                   "folder, that identify wrote for a campaign without [rotor]); the report's \"Under rotation\" "
+                   "shows both frequency responses and K, ωn, ζ, τ static against rotating with their differences.")
 def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, bootstrap: int, keep_going: bool,
              workers: int, scheduler: str | None, force: bool, quiet: bool, as_json: bool, fix_text: tuple[str, ...],
-             bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str, self_calibrate_plane: bool) -> None:
+             bound_text: tuple[str, ...], tie_text: tuple[str, ...], nonlinear: str, self_calibrate_plane: bool,
+             beside: Path | None) -> None:
     """Identify the transfer function from a CAMPAIGN manifest (campaign.toml)."""
     from .campaign import identify as run_identify
     from .campaign import load_campaign, track_campaign
@@ -354,6 +359,14 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
     if self_calibrate_plane and manifest.plane is not None:
         raise ServoscopeError(f"{campaign}: [camera] plane is given: --self-calibrate-plane is for footage without a "
                               "plane; leave one of them out")
+    static = None
+    if beside is not None:  # read and checked before any tracking
+        from .campaign.compare import load_static_result
+
+        if manifest.rotor is None:
+            raise ServoscopeError(f"{campaign}: --beside compares a turning rotor's campaign (one with [rotor]) with "
+                                  "a static one; this campaign has no [rotor]")
+        static = load_static_result(beside)
     check_out_dir(out_dir, manifest)
     from ._io import staged_folder
 
@@ -379,11 +392,22 @@ def identify(campaign: Path, out_dir: Path, fit_mode: str, order_text: str, boot
             result = run_identify(manifest, tracks=tracks, fit=fit_mode, order=order, bootstrap=bootstrap,
                                   keep_going=keep_going, fix=fix or None, bounds=bounds or None, nonlinear=nonlinear,
                                   ties=ties or None, self_calibrate_plane=self_calibrate_plane)
+        if static is not None:
+            from .campaign.compare import with_static_comparison
+
+            result = with_static_comparison(result, static, static_path=beside)
         write_report(result, stage)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     elif not quiet:
         print_model(result)
+        if static is not None:
+            from .campaign.compare import ResultComparison
+
+            compared = ResultComparison.from_summary(result.rotor["beside_static"])
+            click.echo(f"beside the static campaign ({compared.static_path}), rotating − static:")
+            for line in compared.describe():
+                click.echo(f"  {line}")
         click.echo(f"report: {out_dir / 'report.html'}")
 
 

@@ -5,12 +5,17 @@ H.264 at 20 Mbit/s (720×576, 100 frames/s) shrinks the smallest sticker motions
 own standard error, and pulls ωn down (docs/accuracy.md, "Identification: stated uncertainty").
 The Jacobian cannot see an error that a dwell's own scatter does not show; the delete-one-dwell
 jackknife can. Seed 1 is the worst of the four measured.
+
+Eight dwells from 0.5 to 15 Hz (the GOP test's campaign, tests/campaign/test_identify_twin_h264_gop.py),
+not the preset's fourteen: the same effect (the Jacobian's ωn −3.1 σ, the jackknife's −1.05 σ) at
+half the rendering. With fewer dwells the intervals are wider: ωn's half-width 1.4 % against 1.0 %.
 """
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
@@ -21,7 +26,8 @@ from servoscope.simulate import simulate_campaign
 @pytest.fixture(scope="module")
 def h264_campaign(tmp_path_factory):
     return simulate_campaign(tmp_path_factory.mktemp("h264paper"), preset="paper", seed=1, codec="h264",
-                             bit_rate=20_000_000, include_step=False)
+                             bit_rate=20_000_000, frequencies_hz=tuple(np.geomspace(0.5, 15.0, 8)),
+                             include_step=False)
 
 
 @pytest.fixture(scope="module")
@@ -50,12 +56,13 @@ def test_h264_intervals_contain_truth(h264_campaign, h264_tracks, fit):
         assert low <= true <= high, (fit, name, low, true, high)
         if abs(value - true) > tq * model.stderr_jacobian[name]:
             missed_by_jacobian.append(name)
-        # Still intervals that say something: within the issue's accuracy targets.
-        assert (high - low) / 2 < {"damping_ratio": 0.03, "dead_time_s": 0.02}.get(name, 0.01) * true
+        # Still intervals that say something: near the issue's accuracy targets (1 % for K and ωn,
+        # from fourteen dwells; eight give ωn ±1.4 %).
+        assert (high - low) / 2 < {"damping_ratio": 0.03, "dead_time_s": 0.02}.get(name, 0.015) * true
     if fit == "magnitude":
         # What the jackknife is for: on this footage the Jacobian's ωn interval misses the truth.
         assert "natural_frequency_rad_s" in missed_by_jacobian
-        assert model.influence["natural_frequency_rad_s"]["dwell"].startswith("dwell_14")
+        assert model.influence["natural_frequency_rad_s"]["dwell"].endswith("_15.00Hz")
 
 
 def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, h264_tracks, tmp_path):
@@ -69,6 +76,6 @@ def test_cli_names_the_dwell_omega_n_rests_on(h264_campaign, h264_tracks, tmp_pa
     assert proc.returncode == 0, proc.stderr
     # The table goes to stdout; the warning to stderr, naming the 15 Hz dwell.
     assert "natural frequency ωn" in proc.stdout
-    assert "warning: natural frequency rests on dwell_14_15.00Hz" in proc.stderr, proc.stderr
+    assert "warning: natural frequency rests on dwell_08_15.00Hz" in proc.stderr, proc.stderr
     result = json.loads((tmp_path / "o" / "result.json").read_text())
-    assert any(w.startswith("natural frequency rests on dwell_14") for w in result["warnings"])
+    assert any(w.startswith("natural frequency rests on dwell_08_15") for w in result["warnings"])

@@ -1,4 +1,10 @@
-"""The report's section "Under rotation": a turning rotor's passes, speed and blade-to-blade pitch (issue 33)."""
+"""The report's section "Under rotation": a turning rotor's passes, speed and blade-to-blade pitch (issue 33).
+
+Its parts: the fastest dwell's passes by blade with the fitted sine; one of that dwell's passes drawn on
+its frames (:mod:`servoscope.report.rotor_frame`, the footage read again; one line instead where it is gone);
+the rotor speed and blade-to-blade tables; and, after ``identify --beside``, the response beside the static
+campaign's (:mod:`servoscope.report.rotor_beside`).
+"""
 
 from __future__ import annotations
 
@@ -9,12 +15,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..errors import ServoscopeError
+from ..markers.settings import TrackerSettings
+from ..video import is_frame_source
+from ..video.frame_source import parse_frame_source
 from .html import ReportSection
+from .rotor_beside import beside_static_part
+from .rotor_frame import pass_frame_figure, pass_on_frame
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..campaign.result import IdentificationResult
 
-__all__ = ["passes_figure", "rotor_section"]
+__all__ = ["footage_path", "passes_figure", "rotor_section"]
 
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
@@ -73,6 +85,7 @@ def rotor_section(result: "IdentificationResult", figures_dir: Path | None) -> R
                  f"{label} at {fit.frequency_hz:.4g} Hz, {100 * fit.frequency_hz / fit.pass_nyquist_hz:.0f} % of the "
                  f"passes' Nyquist frequency ({fit.pass_nyquist_hz:.4g} Hz); shaded: the steady-state window.",
                  "Passes by blade", name="rotor_passes")
+        _frame_part(s, result, label)
     s.table(["test", "rotor speed (rev/s)", "passes"],
             [[t["label"], f"{t['rev_per_s']:.5f} ± {t['rev_per_s_stderr']:.1g}", t["passes"]] for t in rotor["tests"]])
     if rotor["blade_differences"]:
@@ -88,4 +101,49 @@ def rotor_section(result: "IdentificationResult", figures_dir: Path | None) -> R
                "not pooled. Give each blade its own colours to follow one blade through the campaign.")
     if rows:
         s.table(["dwell", "blade", "pitch − blade 0's (°)", "95 % interval (°)"], rows)
+    beside_static_part(s, result)
     return s
+
+
+def footage_path(result: "IdentificationResult", label: str) -> Path:
+    """Where a test's footage is: as the campaign names it, else as its campaign.toml does (a result loaded
+    back from its files names the video alone)."""
+    video = Path(next(t.video for t in result.campaign.tests if t.label == label))
+    if video.exists() or is_frame_source(video) and Path(parse_frame_source(video).path).exists():
+        return video
+    from ..campaign.manifest import load_campaign
+
+    try:
+        manifest = load_campaign(result.campaign.path, check_videos=False)
+    except (ServoscopeError, OSError):
+        return video
+    return Path(next((t.video for t in manifest.tests if t.label == label), video))
+
+
+def _frame_part(s: ReportSection, result: "IdentificationResult", label: str) -> None:
+    """The passes drawn on a frame of ``label``'s footage, or one line saying why not."""
+    c = result.campaign
+    if c.rotor is None:
+        s.text(f"The passes drawn on a frame are left out: the rotor's stickers are not known (campaign.toml "
+               f"{c.path} could not be read again).")
+        return
+    path = footage_path(result, label)
+    if not path.exists() and not is_frame_source(path):
+        s.text(f"The passes drawn on a frame are left out: {label}'s footage {path} is not there any more.")
+        return
+    settings = TrackerSettings(led=c.led, led_near=c.led_near, camera=c.camera, exposure_s=c.exposure_s,
+                               timestamp=c.timestamp)
+    try:
+        view = pass_on_frame(path, c.rotor, settings)
+    except (ServoscopeError, OSError) as exc:
+        s.text(f"The passes drawn on a frame are left out: {label}'s footage could not be read again ({exc}).")
+        return
+    k = view.drawn
+    s.figure(pass_frame_figure(view, f"{label}: blade {view.blade}'s pass at t = {view.pass_time_s:.5f} s"),
+             f"Frame {view.drawn_frame} of {label}, the pass's frame nearest ψ = 0 (ψ = "
+             f"{math.degrees(float(view.azimuth_rad[k])):+.2f}°, from the rotor speed and the pass's time): each "
+             f"sticker's measured centroid (+ lead, × trail) and their line; dots, the same stickers in the pass's "
+             f"other frames. Right: the stickers' line in the picture (φ) against the fitted azimuth, and corrected "
+             f"for the foreshortening (θ); the pass's pitch, {math.degrees(view.pitch_rad):.3f}°, is the line's "
+             f"value at ψ = 0. Below: each frame of the pass around the tip (cut: a sticker at the picture's edge, "
+             f"not used).", "A pass drawn on its frames", name="rotor_pass_frame")
