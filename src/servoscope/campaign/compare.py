@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..errors import ServoscopeError
+from ..parameters import interval95
 from ..results import html_rows, import_pandas, jsonable
 from .result import IdentificationResult
 
@@ -24,7 +25,7 @@ __all__ = ["COMPARED_PARAMETERS", "DIFFERS_Z", "ParameterComparison", "ResultCom
 #: The headline parameters compared, in the report's order: K, ωn, ζ, τ.
 COMPARED_PARAMETERS = ("gain", "natural_frequency_rad_s", "damping_ratio", "dead_time_s")
 #: |z| beyond which a difference is called real: a two-sided test at 5 % (the intervals' 95 %).
-DIFFERS_Z = 1.959963984540054
+DIFFERS_Z = interval95(0.0, 1.0)[1]
 
 
 def _number(value) -> float:

@@ -281,14 +281,21 @@ def frequency_response_section(result: "IdentificationResult", figures_dir) -> R
     dead = result.dead_time_s
     s = ReportSection("Frequency response", figures_dir=figures_dir)
     omega_grid = np.logspace(np.log10(2 * np.pi * fr.frequency_hz.min() / 2), np.log10(2 * np.pi * fr.frequency_hz.max() * 2), 300)
+    tau = model.dead_time_s if model.dead_time_s is not None else dead
+    # Each measured phase drawn on the model's branch (modulo 360°): the dwells' own unwrapping cannot
+    # follow a dead time across dwells far apart in frequency (a rotor's 3, 8, 14 Hz: more than 180° apart).
+    model_phase = model_phase_deg(model.transfer_function, omega_grid, tau)
+    phase = np.asarray(fr.phase_deg, dtype=float)
+    at_dwells = np.interp(2 * np.pi * np.asarray(fr.frequency_hz), omega_grid, model_phase)
+    phase = phase + 360.0 * np.round((at_dwells - phase) / 360.0)
     fig = bode_figure(
         fr.frequency_hz,
         fr.gain,
         fr.gain_stderr,
-        fr.phase_deg,
+        phase,
         omega_grid / (2 * np.pi),
         model.magnitude(omega_grid),
-        model_phase_deg(model.transfer_function, omega_grid, model.dead_time_s if model.dead_time_s is not None else dead),
+        model_phase,
         bandwidth_rad_s=model.bandwidth_rad_s,
     )
     s.figure(fig, "Measured gains (error bars: ±1 standard error) and the fitted 2nd-order model; phase measured from the LED's switch, model phase including the step test's dead time.", "Bode plot", name="bode")

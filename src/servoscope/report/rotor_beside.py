@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..campaign.compare import ResultComparison, load_static_result
+from ..campaign.compare import DIFFERS_Z, ResultComparison, load_static_result
 from ..errors import ServoscopeError
 from ..numbers import format_interval, format_with_uncertainty
 from .html import ReportSection
@@ -103,7 +103,7 @@ def beside_static_part(s: ReportSection, result: "IdentificationResult") -> None
                f"read again ({why}). Its numbers, recorded when this result was made, follow.")
     s.text(f"Beside the static campaign's identification ({where}): rotating − static, its error the two in "
            f"quadrature (the campaigns are independent), z their ratio; a difference beyond |z| > "
-           f"{recorded.get('differs_beyond_z', 1.96):.2f} (95 %) is called real.")
+           f"{recorded.get('differs_beyond_z', DIFFERS_Z):.2f} (95 %) is called real.")
     s.table(["parameter", "static", "rotating", "rotating − static", "z", "beyond the errors"],
             comparison_rows(comparison))
     names = [_LABELS.get(n, (n, 1))[0] for n in comparison.differing]

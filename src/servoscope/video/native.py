@@ -124,6 +124,15 @@ class NativeFrame:
     rgb_of: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
     _rgb: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        # The samples go on read-only, whatever their source: a file's view is read-only, a decoder's or a
+        # reader thread's array writeable, and numba compiles every kernel that reads them once for each
+        # (2–8 s of CPU each on a fresh install, and in every test worker). A view: nothing is copied.
+        if self.samples.flags.writeable:
+            view = self.samples.view()
+            view.flags.writeable = False
+            self.samples = view
+
     @property
     def shape(self) -> tuple[int, int]:
         """(height, width) of the frame."""
