@@ -77,7 +77,7 @@ class ReportSection:
             # file's PNG scaled down, not drawn a third time (drawing is most of a report's time).
             self.figures_dir.mkdir(parents=True, exist_ok=True)
             buffer = io.BytesIO()
-            fig.savefig(buffer, format="png", dpi=FILE_DPI)
+            fig.savefig(buffer, format="png", dpi=FILE_DPI, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
             with atomic_path(self.figures_dir / f"{name}.png") as tmp:
                 tmp.write_bytes(buffer.getvalue())
             # No date and fixed element ids: the same result gives the same bytes.
@@ -111,6 +111,10 @@ def _fmt(value: object) -> str:
 #: Resolution of the figure files (PNG) and of the page's images, dots per inch.
 FILE_DPI = 150
 PAGE_DPI = 110
+#: zlib level of the report's PNGs. Level 1 writes a 7.5×6.2 in figure's page image in 38 ms against
+#: level 6's (PIL's default) 99 ms, and its 150 dpi file in 148 ms against 183 ms, for 19–33 % more bytes:
+#: a report of 20 figures is written ~2 s sooner for ~1 MB more.
+PNG_COMPRESS_LEVEL = 1
 
 
 def _page_png_base64(png: bytes) -> str:
@@ -122,7 +126,7 @@ def _page_png_base64(png: bytes) -> str:
         small = image.resize((max(1, round(image.width * scale)), max(1, round(image.height * scale))),
                              Image.Resampling.LANCZOS)
         out = io.BytesIO()
-        small.save(out, format="png", optimize=False)
+        small.save(out, format="png", compress_level=PNG_COMPRESS_LEVEL)
     return base64.b64encode(out.getvalue()).decode("ascii")
 
 
@@ -131,7 +135,7 @@ def figure_png_base64(fig: Figure, dpi: int = PAGE_DPI) -> str:
     import matplotlib.pyplot as plt
 
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
+    fig.savefig(buffer, format="png", dpi=dpi, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     plt.close(fig)
     return base64.b64encode(buffer.getvalue()).decode("ascii")
 
