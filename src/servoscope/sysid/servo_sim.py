@@ -262,11 +262,60 @@ def simulate_trace(trace: ServoTrace, structure: str, params: dict[str, float], 
     saturation = float(params["saturation_rad"]) if structure == "saturation" else 0.0
     half_play = 0.5 * float(params["backlash_rad"]) if structure == "backlash" else 0.0
     y = _chain(command, gain, phi, gam, rate_step, saturation, half_play)
-    grid = start + np.arange(n + 1) * GRID_STEP_S
+    t = np.ascontiguousarray(t, dtype=np.float64)
     if half_e <= 0.0:
-        return np.interp(t, grid, y, left=0.0)
-    # The exposure's average: the output's running integral (trapezoids) across the window.
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * GRID_STEP_S)))
-    # The output is 0 before the grid starts: interp's clamping to the first value (0) says so.
-    area = np.interp(t + half_e, grid, integral) - np.interp(t - half_e, grid, integral)
+        return _on_grid(t, start, GRID_STEP_S, y)
+    # The exposure's average: the output's running integral (trapezoids) across the window; 0 before
+    # the grid starts (the integral's first value).
+    integral = _running_integral(y, GRID_STEP_S)
+    area = _on_grid(t + half_e, start, GRID_STEP_S, integral) - _on_grid(t - half_e, start, GRID_STEP_S, integral)
     return area / trace.exposure_s
+
+
+@njit(cache=True)
+def _running_integral(y, step):  # pragma: no cover - numba
+    # concatenate(([0], cumsum(0.5 * (y[1:] + y[:-1]) * step))), in numpy's order of operations (the same bits)
+    # without its four temporaries: a fit calls this for every trace at every evaluation.
+    out = np.empty(y.size)
+    out[0] = 0.0
+    acc = 0.0
+    for k in range(1, y.size):
+        acc = acc + 0.5 * (y[k] + y[k - 1]) * step
+        out[k] = acc
+    return out
+
+
+@njit(cache=True)
+def _on_grid(x, start, step, fp):  # pragma: no cover - numba
+    # np.interp(x, start + arange(fp.size) * step, fp, left=0.0) to the bit (numpy's interpolation formula
+    # and its grid's arithmetic), without building the grid: a fit calls this for every trace at every
+    # evaluation.
+    n = fp.size
+    out = np.empty(x.size)
+    last = start + float(n - 1) * step
+    for i in range(x.size):
+        xi = x[i]
+        if not xi >= start:  # before the grid (or NaN, as np.interp's left)
+            out[i] = 0.0 if xi < start else xi
+            continue
+        if xi >= last:
+            out[i] = fp[n - 1]
+            continue
+        j = int((xi - start) / step)
+        if j > n - 2:
+            j = n - 2
+        # The grid's own values decide the interval, as numpy's search over them does.
+        while j > 0 and start + float(j) * step > xi:
+            j -= 1
+        while j < n - 2 and start + float(j + 1) * step <= xi:
+            j += 1
+        x0 = start + float(j) * step
+        x1 = start + float(j + 1) * step
+        slope = (fp[j + 1] - fp[j]) / (x1 - x0)
+        value = slope * (xi - x0) + fp[j]
+        if value != value:  # numpy's fallbacks where the slope is not finite
+            value = slope * (xi - x1) + fp[j + 1]
+            if value != value and fp[j] == fp[j + 1]:
+                value = fp[j]
+        out[i] = value
+    return out
