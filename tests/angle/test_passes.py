@@ -134,3 +134,36 @@ def test_midpoint_null_channel_measures_a_shared_error():
     assert abs(var / truth - 1) < 0.2
     assert midpoint_variance_rad2(measured_pitch[:4], height[:4], sep_px) == (math.nan, 0) or \
         math.isnan(midpoint_variance_rad2(measured_pitch[:4], height[:4], sep_px)[0])
+
+
+def test_short_passes_against_the_projection():
+    # Passes of 2-3 frames (25 rev/s at 2,000 frames/s) projected by OpenCV: each pass's pitch at ψ = 0 from its
+    # few frames, the rate shrunk towards the passes' pooled slope, against the true pitch at t_c.
+    from servoscope.angle.pass_short import fit_short_pass, pitch_rate_spread_rad_s, pooled_slope_rad_s
+
+    rng = np.random.default_rng(7)
+    rev, fps, noise_px = 25.0, 2000.0, 0.005
+    pitch = lambda t: math.radians(5.0) + 0.03 * np.sin(2 * np.pi * 9.0 * t)  # noqa: E731
+    t_true = 0.01 + np.arange(40) / (2 * rev)
+    data = []
+    for j, tc in enumerate(t_true):
+        t = np.arange(math.ceil((tc - 0.0007 + 0.0002 * (j % 3)) * fps), math.floor((tc + 0.0007) * fps) + 1) / fps
+        lead, trail = project(2 * np.pi * rev * (t - tc), pitch(t))
+        lead += rng.normal(0, noise_px, lead.shape)
+        trail += rng.normal(0, noise_px, trail.shape)
+        data.append((t, angle_rad_from_centroids(lead, trail)))
+    assert {t.size for t, _ in data} <= {2, 3} and min(t.size for t, _ in data) == 2
+    prior, prior_var = pooled_slope_rad_s(data, t_true, rev, K_PINHOLE)
+    held = [fit_short_pass(t, a, tc, rev, K_PINHOLE) for (t, a), tc in zip(data, t_true)]
+    spread = pitch_rate_spread_rad_s(t_true, np.array([f.pitch_rad for f in held]), np.zeros(40, int))
+    lead0, trail0 = project(0.0, math.radians(5.0))
+    frame_var = 2 * (noise_px / float(np.hypot(*(lead0 - trail0)[0]))) ** 2  # one frame's angle noise (rad²)
+    fits = [fit_short_pass(t, a, tc, rev, K_PINHOLE, rate_spread_rad_s=spread, frame_variance_rad2=frame_var,
+                           rate_prior_rad_s=prior, rate_prior_var=prior_var) for (t, a), tc in zip(data, t_true)]
+    err = np.array([f.pitch_rad - pitch(f.time_s) for f in fits])
+    held_err = np.array([f.pitch_rad - pitch(f.time_s) for f in held])
+    # The rate from the frames' own slope takes out what holding it at 0 leaves: 0.0029° against 0.0103°.
+    assert np.sqrt(np.mean(err ** 2)) < 0.5 * np.sqrt(np.mean(held_err ** 2))
+    own = np.array([f.pitch_stderr_rad for f in fits])  # the rate's part alone (the frames' is the caller's)
+    total = np.sqrt(own ** 2 + frame_var / np.array([f.frames_used for f in fits]))
+    assert 0.5 < np.sqrt(np.mean((err / total) ** 2)) < 1.5  # measured 0.95

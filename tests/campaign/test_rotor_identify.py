@@ -70,6 +70,10 @@ def test_the_command_identifies_the_servo_from_the_passes(rotor_campaign, identi
     assert abs(tau["value"] - truth["dead_time_s"]) < 1e-3
     assert tau["ci95"][0] <= truth["dead_time_s"] <= tau["ci95"][1]
     assert "gain K" in stdout and "report:" in stdout
+    # The passes' pitch scale (monochrome: 0.5 %) is in the gain's error: at least that much of it.
+    from servoscope.campaign.rotor import ROTOR_SCALE_STDERR_MONO
+
+    assert params["gain"]["stderr"] >= ROTOR_SCALE_STDERR_MONO * params["gain"]["value"]
 
 
 def test_result_json_states_the_rotor_and_the_report_shows_it(rotor_campaign, identified):
@@ -93,6 +97,16 @@ def test_result_json_states_the_rotor_and_the_report_shows_it(rotor_campaign, id
     # Monochrome footage tells the blades apart by their order only: blade 0 is each video's first seen (which
     # the passes kept do not say), so the rigging difference is ±0.2°, and it is not pooled over the videos.
     assert rotor["identified_by"] == "order" and rotor["blade_differences"] == []
+    # The pitch's scale uncertainty the gain's interval carries, and why (monochrome: 0.5 %).
+    from servoscope.campaign.rotor import ROTOR_AMPLITUDE_STDERR_MONO_RAD, ROTOR_SCALE_STDERR_MONO
+
+    assert rotor["systematic"]["pitch_scale_relative_stderr"] == ROTOR_SCALE_STDERR_MONO
+    assert rotor["systematic"]["dwell_amplitude_stderr_rad"] == ROTOR_AMPLITUDE_STDERR_MONO_RAD
+    assert "monochrome" in rotor["systematic"]["why"]
+    # Each dwell's amplitude error carries it (at least that much).
+    dwell_fits = [t["sine_fit"] for t in result["tests"] if t.get("sine_fit")]
+    assert len(dwell_fits) == 3
+    assert all(f["amplitude_stderr"] >= ROTOR_AMPLITUDE_STDERR_MONO_RAD for f in dwell_fits)
     dwells = [entry for entry in rotor["tests"] if "blade_differences" in entry]
     assert len(dwells) == 3
     for entry in dwells:
@@ -100,6 +114,8 @@ def test_result_json_states_the_rotor_and_the_report_shows_it(rotor_campaign, id
         want = math.copysign(math.radians(0.2), difference["difference_rad"])
         assert abs(difference["difference_rad"] - want) < math.radians(0.03), (entry["label"], difference)
         assert difference["ci95_rad"][0] <= want <= difference["ci95_rad"][1], (entry["label"], difference)
+        # Each blade's constant bias (its stickers cross the same rows every revolution) is in it: √2 of it.
+        assert difference["difference_stderr_rad"] >= math.sqrt(2) * ROTOR_AMPLITUDE_STDERR_MONO_RAD
     html = (out / "report.html").read_text()
     assert "Under rotation" in html and "rotor speed (rev/s)" in html
     # The saved result loads back with its rotor and its pass fits.
@@ -110,6 +126,31 @@ def test_result_json_states_the_rotor_and_the_report_shows_it(rotor_campaign, id
     assert loaded.rotor == result["rotor"]
     assert all(isinstance(f, PassSineFit) for f in loaded.sine_fits.values())
     assert loaded.summary()["model"]["parameters"] == result["model"]["parameters"]
+
+
+def test_the_pitch_scale_follows_the_footage(rotor_campaign, quick_campaign, tmp_path):
+    """Colour footage (chroma at half resolution; a codec) states the larger pitch-scale uncertainty, a static
+    campaign none: the gain's interval carries what the twin measured of each (docs/rotor.md)."""
+    from servoscope.campaign import load_campaign
+    from servoscope.campaign.rotor import (ROTOR_AMPLITUDE_STDERR_COLOUR_RAD, ROTOR_AMPLITUDE_STDERR_MONO_RAD,
+                                           ROTOR_SCALE_STDERR_COLOUR, ROTOR_SCALE_STDERR_MONO, codec_warning,
+                                           rotor_scale_error, rotor_systematics)
+    from servoscope.video.writer import VideoWriter
+
+    mono = load_campaign(rotor_campaign)
+    assert rotor_scale_error(mono)[0] == ROTOR_SCALE_STDERR_MONO and codec_warning(mono) is None
+    clip = tmp_path / "colour.mp4"
+    with VideoWriter(clip, 64, 48, 4000) as writer:
+        for k in range(4):
+            writer.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    colour = replace(mono, rotor=replace(mono.rotor, blades=(("#d62728", "#2ca02c"), ("#1f77b4", "#ff7f0e"))),
+                     tests=tuple(replace(t, video=clip) for t in mono.tests))
+    sigma, why = rotor_scale_error(colour)
+    assert sigma == ROTOR_SCALE_STDERR_COLOUR > ROTOR_SCALE_STDERR_MONO and "h264-compressed colour" in why
+    assert rotor_systematics(colour).amplitude_stderr_rad == ROTOR_AMPLITUDE_STDERR_COLOUR_RAD \
+        > rotor_systematics(mono).amplitude_stderr_rad == ROTOR_AMPLITUDE_STDERR_MONO_RAD
+    assert "h264" in codec_warning(colour) and "±1.3 %" in codec_warning(colour)
+    assert rotor_scale_error(load_campaign(quick_campaign)) is None
 
 
 def test_a_rotor_whose_colours_are_never_seen_is_one_clear_error(rotor_campaign, tmp_path, capsys):

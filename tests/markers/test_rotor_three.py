@@ -40,7 +40,17 @@ def test_three_blades_against_truth(clip):
     err = table.pitch_rad - (collective(table.time_s) + np.array(OFFSETS)[table.blade])
     assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.04  # measured 0.031° (each blade ±0.03° biased: codec)
     z = err / table.pitch_stderr_rad
-    assert 0.4 < math.sqrt(np.mean(z ** 2)) < 2.0  # measured 1.63: 5 passes a blade, the null channel has few dof
+    assert 0.4 < math.sqrt(np.mean(z ** 2)) < 2.0  # measured 1.63: each blade's own constant codec bias (below)
+    # The stated error is the pass-to-pass one (what a dwell's sine, with one offset a blade, sees): about each
+    # blade's mean it holds (measured 1.26, 12 degrees of freedom); the blade's constant bias (±0.03°, the H.264's
+    # chroma around a small sticker, frozen from pass to pass) reads as a rigging offset, not an error here.
+    zw = []
+    for b in range(3):
+        mine = table.blade == b
+        n = int(mine.sum())
+        zw.extend((err[mine] - err[mine].mean()) / table.pitch_stderr_rad[mine] * math.sqrt(n / (n - 1)))
+    zw = np.array(zw)
+    assert 0.6 < math.sqrt(np.mean(zw ** 2)) < 1.4
     t = table.time_s
     span = (rig.azimuth_rad(t.max(), 0) - rig.azimuth_rad(t.min(), 0)) / (2 * np.pi * (t.max() - t.min()))
     assert abs(table.rev_per_s / span - 1) < 1e-4

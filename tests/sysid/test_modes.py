@@ -68,18 +68,29 @@ def test_the_rigid_quick_campaign_at_full_size_rings_nothing(quick_result):
     assert quick_result.heave_response == ()
 
 
+@pytest.fixture(scope="module")
+def flapping(tmp_path_factory):
+    """codec → a flapping blade's campaign: rendered once, raw, and its videos encoded again as H.264 (the
+    bytes rendering with H.264 writes). The quick preset's dwells and one at 8.7 Hz, 1 s long: far shorter
+    than the mode's settling (4/(ζω) = 2.4 s), where a sine fitted to its window reads the transient
+    (issue 32)."""
+    from servoscope.simulate import reencode_campaign, simulate_campaign
+
+    raw = simulate_campaign(tmp_path_factory.mktemp("flap_raw"), "quick", 0, width=480, height=384, codec="raw",
+                            blade_mode_hz=9.0, blade_mode_damping=0.03, step_after_t0_s=1.5,
+                            frequencies_hz=(1.0, 2.289, 3.2, 4.2, 5.241, 6.5, 8.7, 12.0))
+    return {"raw": raw, "h264": reencode_campaign(raw, tmp_path_factory.mktemp("flap_h264"), codec="h264")}
+
+
 @pytest.mark.parametrize("codec", ["raw", "h264"])
-def test_twin_flapping_blade_mode_from_the_step(tmp_path, codec):
+def test_twin_flapping_blade_mode_from_the_step(flapping, codec, tmp_path):
     from servoscope.angle import heave_px, pivot_motion
     from servoscope.campaign.runner import identify
     from servoscope.simulate import simulate_campaign
 
-    # The quick preset's dwells and one at 8.7 Hz, 1 s long: far shorter than the mode's settling
-    # (4/(ζω) = 2.4 s), where a sine fitted to its window reads the transient (issue 32).
-    toml = simulate_campaign(tmp_path, "quick", 0, width=480, height=384, codec=codec, blade_mode_hz=9.0,
-                             blade_mode_damping=0.03, step_after_t0_s=1.5,
-                             frequencies_hz=(1.0, 2.289, 3.2, 4.2, 5.241, 6.5, 8.7, 12.0))
-    truth = json.loads((tmp_path / "truth.json").read_text())
+    toml = flapping[codec]
+    truth = json.loads(toml.with_name("truth.json").read_text())
+    assert truth["video"]["codec"] == codec
     assert truth["modes"][0]["frequency_hz"] == 9.0
     res = identify(toml, workers=1)
     # Found from the step alone and from the dwells alone (each dwell rings down after its sine starts),

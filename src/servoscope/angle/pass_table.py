@@ -49,7 +49,12 @@ class PassTable:
     first_frame, last_frame : ndarray of int
         Each pass's first and last frame with the blade's stickers in the picture.
     pitch_rate_rad_s : ndarray
-        The pitch's own change through each pass.
+        The pitch's own change through each pass (0 where held: a short pass).
+    n_whole : ndarray of int
+        Frames with both stickers whole read for the pitch (outliers out). Fewer than
+        :data:`servoscope.angle.passes.MIN_PASS_FRAMES` (4): a *short* pass, its crossing
+        time from the blade's path and its own rate held at 0 (its error says so); -1 in
+        a table written before the column.
     warnings : tuple of str
     """
 
@@ -71,12 +76,13 @@ class PassTable:
     first_frame: NDArray[np.float64] = field(default_factory=lambda: readonly([]))
     last_frame: NDArray[np.float64] = field(default_factory=lambda: readonly([]))
     pitch_rate_rad_s: NDArray[np.float64] = field(default_factory=lambda: readonly([]))
+    n_whole: NDArray[np.float64] = field(default_factory=lambda: readonly([]))
     warnings: tuple[str, ...] = ()
 
     #: The per-pass columns, in the order of :meth:`to_pandas` and the summary's ``passes``.
     COLUMNS = ("time_s", "blade", "pitch_rad", "pitch_stderr_rad", "azimuth_from_rad", "azimuth_to_rad", "frames",
-               "first_frame", "last_frame", "pitch_rate_rad_s")
-    INT_COLUMNS = ("blade", "frames", "first_frame", "last_frame")
+               "first_frame", "last_frame", "pitch_rate_rad_s", "n_whole")
+    INT_COLUMNS = ("blade", "frames", "first_frame", "last_frame", "n_whole")
 
     def __post_init__(self) -> None:
         n = np.size(self.time_s)

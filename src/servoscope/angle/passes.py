@@ -42,6 +42,9 @@ The estimator (:func:`fit_passes`), documented in docs/rotor.md:
    (:func:`midpoint_variance_rad2`), pooled over the blades and shrunk towards one frame's
    residual variance (:func:`frame_variance_rad2`) where the passes are few
    (:func:`servoscope.pipeline.rotor.track_passes`).
+5. **Short passes** (2–3 frames with both stickers whole, :mod:`servoscope.angle.pass_short`):
+   their crossing time from the path the blade's every pass follows, ``k`` common, their own
+   rate held at 0 with its spread in their error.
 """
 
 from __future__ import annotations
@@ -60,7 +63,8 @@ __all__ = ["PassFit", "PassTable", "centre_column", "crossing_time", "fit_pass",
 
 #: Residuals beyond this many robust σ (1.4826·MAD) are dropped from a pass's line (once).
 OUTLIER_MADS = 4.0
-#: Fewest frames with both stickers whole for a pass's pitch.
+#: Fewest frames with both stickers whole for a pass's own line (fewer, down to 2: a short pass,
+#: :mod:`servoscope.angle.pass_short`).
 MIN_PASS_FRAMES = 4
 
 
@@ -346,7 +350,8 @@ def fit_pass(time_s: NDArray[np.float64], angle_rad: NDArray[np.float64], t_c_s:
 
 def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_c_s: NDArray[np.float64],
                rev_per_s: float, *, t_c_stderr_s: NDArray[np.float64] | None = None,
-               k: float | None = None, shared_error: bool = True) -> tuple[list[PassFit], float, float]:
+               k: float | None = None, shared_error: bool = True,
+               k_min_frames: int = MIN_PASS_FRAMES) -> tuple[list[PassFit], float, float]:
     """Every pass's pitch at ψ = 0, the foreshortening's ``k`` fitted common to them.
 
     Parameters
@@ -363,6 +368,11 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
         Add one frame's residual variance (pooled over the passes) to each pass's pitch
         variance: the frames of a pass share their centroid errors (True, the default; False
         gives the line's own error, for independent frames).
+    k_min_frames : int
+        Passes of at least this many frames (and fewer than :data:`MIN_PASS_FRAMES`) tell ``k``
+        too, each by its frames' mean (its own rate held at 0: odd in ψ, it does not bias the
+        even correction); their pitch is :func:`servoscope.angle.pass_short.fit_short_pass`'s
+        (None here).
 
     Returns
     -------
@@ -372,9 +382,11 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
     t_c = np.asarray(t_c_s, dtype=np.float64)
     err = np.zeros(t_c.size) if t_c_stderr_s is None else np.nan_to_num(np.asarray(t_c_stderr_s, dtype=float))
     usable = [i for i, (t, _) in enumerate(passes) if np.size(t) >= MIN_PASS_FRAMES and np.isfinite(t_c[i])]
+    telling = [i for i, (t, _) in enumerate(passes)
+               if np.size(t) >= min(k_min_frames, MIN_PASS_FRAMES) and np.isfinite(t_c[i])]
     k_stderr = math.nan
     if k is None:
-        k, k_stderr = _fit_k([passes[i] for i in usable], t_c[usable], rev_per_s)
+        k, k_stderr = _fit_k([passes[i] for i in telling], t_c[telling], rev_per_s)
     fits = [fit_pass(*passes[i], t_c[i], rev_per_s, k, t_c_stderr_s=err[i],
                      k_stderr=0.0 if not math.isfinite(k_stderr) else k_stderr) for i in usable]
     if shared_error and fits:
@@ -473,15 +485,17 @@ def _fit_k(passes, t_c: np.ndarray, rev_per_s: float) -> tuple[float, float]:
     taus = [np.asarray(t, dtype=float) - tc for (t, _), tc in zip(passes, t_c)]
     phis = [np.asarray(p, dtype=float) for _, p in passes]
     n = sum(x.size for x in taus)
-    dof = n - 2 * len(passes) - 1
+    # A pass of fewer than MIN_PASS_FRAMES frames: its mean alone (its own rate held at 0).
+    lines = [x.size >= MIN_PASS_FRAMES for x in taus]
+    dof = n - sum(2 if ln else 1 for ln in lines) - 1
     if dof < 3:
         return ORTHOGRAPHIC_K, math.nan
 
     def rss(k: float) -> float:
         total = 0.0
-        for tau, phi in zip(taus, phis):
+        for tau, phi, ln in zip(taus, phis, lines):
             theta = np.arctan(np.tan(phi) / foreshortening(2.0 * math.pi * rev_per_s * tau, k))
-            A = np.c_[np.ones(tau.size), tau]
+            A = np.c_[np.ones(tau.size), tau] if ln else np.ones((tau.size, 1))
             coef, *_ = np.linalg.lstsq(A, theta, rcond=None)
             r = theta - A @ coef
             total += float(r @ r)

@@ -13,6 +13,7 @@ read a rotor's tests as they read a static one's.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -24,11 +25,15 @@ from ..markers.settings import TrackerSettings
 from ..markers.track import Track
 from ..parameters import interval95, inverse_variance_mean
 from ..pipeline.rotor import track_passes
+from ..sysid.pass_result import BladeDifference
 from ..sysid.pass_sine import fit_pass_sine
 from ..sysid.pass_step import analyse_pass_step
 from .manifest import Campaign, TestSpec
 
-__all__ = ["blades_by_colour", "codec_warning", "pass_track", "rotor_dwell_fits", "rotor_step", "rotor_summary", "track_rotor_campaign"]
+__all__ = ["ROTOR_AMPLITUDE_STDERR_COLOUR_RAD", "ROTOR_AMPLITUDE_STDERR_MONO_RAD", "ROTOR_SCALE_STDERR_COLOUR",
+           "ROTOR_SCALE_STDERR_MONO", "RotorSystematics", "blades_by_colour", "codec_warning", "pass_track",
+           "rotor_dwell_fits", "rotor_scale_error", "rotor_step", "rotor_summary", "rotor_systematics",
+           "track_rotor_campaign"]
 
 
 def pass_track(table: PassTable, video: str) -> Track:
@@ -81,8 +86,10 @@ def track_rotor_campaign(campaign: Campaign, *, keep_going: bool = False, failur
 
 
 def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings: list[str]) -> dict:
-    """Each sine dwell's fit to its passes (label → :class:`~servoscope.sysid.pass_result.PassSineFit`)."""
+    """Each sine dwell's fit to its passes (label → :class:`~servoscope.sysid.pass_result.PassSineFit`), each
+    amplitude's error with the dwell's share of the passes' systematic error (:func:`rotor_systematics`)."""
     n_blades = len(campaign.rotor.blades)
+    shared = rotor_systematics(campaign)
     fits = {}
     for test in campaign.sine_tests:
         table = tables.get(test.label)
@@ -100,9 +107,24 @@ def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings:
         except ServoscopeError as exc:
             warnings.append(f"{test.label}: dwell left out: {exc}")
             continue
+        if shared is not None:
+            # Each dwell's own share of the stickers' sub-pixel bias (RotorSystematics): its amplitude's error;
+            # and each blade's own, constant through the campaign (its stickers cross the same rows every
+            # revolution): in every blade-to-blade difference, √2 of it (two blades).
+            fit = replace(fit, amplitude_stderr=math.hypot(fit.amplitude_stderr, shared.amplitude_stderr_rad),
+                          blade_differences=tuple(_with_blade_bias(d, shared) for d in fit.blade_differences))
         fits[test.label] = fit
         warnings.extend(f"{test.label}: {w}" for w in fit.warnings if w)
     return fits
+
+
+def _with_blade_bias(d: BladeDifference, shared: "RotorSystematics") -> BladeDifference:
+    """``d`` with √2 × the blades' constant bias added to its error in quadrature, its interval widened alike."""
+    se = math.hypot(d.difference_stderr_rad, math.sqrt(2.0) * shared.amplitude_stderr_rad)
+    if not (math.isfinite(d.difference_stderr_rad) and d.difference_stderr_rad > 0):
+        return d
+    half = 0.5 * (d.ci95_rad[1] - d.ci95_rad[0]) * se / d.difference_stderr_rad
+    return replace(d, difference_stderr_rad=se, ci95_rad=(d.difference_rad - half, d.difference_rad + half))
 
 
 def rotor_step(campaign: Campaign, tables: dict[str, PassTable], model, warnings: list[str]):
@@ -130,17 +152,103 @@ def rotor_step(campaign: Campaign, tables: dict[str, PassTable], model, warnings
 #: Codecs whose prediction and quantization smooth a sticker's small vertical offset across a pass.
 _LOSSY = ("h264", "hevc", "mpeg2video", "mpeg4", "vp9", "av1")
 
+#: What the passes' pitch shares beyond its stated errors, measured on the twin (docs/rotor.md, "The pitch's
+#: scale"). Each sticker's centroid carries a vertical sub-pixel bias that follows its row (up to ~0.03 px,
+#: the same with or without noise, blur or a codec), frozen through a pass (the stickers move along the rows),
+#: and over a dwell the sticker nearer the pitch axis moves only a few tenths of a pixel: the bias's gradient
+#: there reads as a scale of the pitch, whose sign the footage does not tell. On colour footage (raw yuv420p or
+#: H.264 at 0.03-0.33 bit per pixel; stickers 10-21 px; mean pitch 0-5°; 4,000-5,000 frames/s) the pitch per
+#: pass against the truth has a slope of 0.983-1.017 (RMS 1.3 % about 1) at ±1.3° of pitch, and each dwell's
+#: amplitude errs by 0.005-0.034° (RMS 0.02°) whatever its size, so that a small dwell's gain errs most
+#: (+6 % at 0.35°). Two terms, then: a scale common to every dwell (the gain's interval, after the fit) and an
+#: amplitude error of each dwell's own (its gain's error, which the fit carries into ωn and ζ).
+ROTOR_SCALE_STDERR_COLOUR = 0.013
+#: Each dwell's amplitude error on colour footage, rad (1σ; 0.02°).
+ROTOR_AMPLITUDE_STDERR_COLOUR_RAD = math.radians(0.02)
+#: The same on a monochrome camera's native samples (the luma-only kernel, no chroma): the paper-rotor
+#: campaign's dwells read 0.1-0.9 % low, K 0.3 % low.
+ROTOR_SCALE_STDERR_MONO = 0.005
+#: Each dwell's amplitude error on monochrome footage, rad (1σ; 0.005°).
+ROTOR_AMPLITUDE_STDERR_MONO_RAD = math.radians(0.005)
 
-def codec_warning(campaign: Campaign) -> str | None:
-    """A warning where the rotor's videos are lossy-compressed (the passes' pitch reads small), else None."""
+
+@dataclass(frozen=True)
+class RotorSystematics:
+    """What a rotor campaign's passes share beyond their stated errors (module constants; docs/rotor.md).
+
+    Attributes
+    ----------
+    scale_relative_stderr : float
+        The pitch's scale, common to every dwell (0.013: 1.3 %): added to the gain's error after the fit.
+    amplitude_stderr_rad : float
+        Each dwell's own amplitude error (rad): added to its amplitude's error before the fit.
+    why : str
+        The footage it was sized for, as the warnings say it.
+    """
+
+    scale_relative_stderr: float
+    amplitude_stderr_rad: float
+    why: str
+
+    def summary(self) -> dict:
+        """Plain values for result.json's ``rotor``."""
+        return {"pitch_scale_relative_stderr": float(self.scale_relative_stderr),
+                "dwell_amplitude_stderr_rad": float(self.amplitude_stderr_rad), "why": self.why}
+
+
+def _codecs(campaign: Campaign) -> list[str]:
+    """The decoder names of the campaign's video files (image folders and high-speed files left out)."""
     from ..video.reader import probe_video
 
-    codecs = sorted({probe_video(t.video).codec for t in campaign.tests if not Path(t.video).is_dir()} & set(_LOSSY))
+    names = set()
+    for t in campaign.tests:
+        if Path(t.video).is_dir():
+            continue
+        try:
+            names.add(probe_video(t.video).codec)
+        except ServoscopeError:
+            continue
+    return sorted(names)
+
+
+def rotor_systematics(campaign: Campaign) -> RotorSystematics | None:
+    """The passes' shared errors for this campaign's footage (:class:`RotorSystematics`), None when static.
+
+    Colour footage (each blade its own colours: chroma at half resolution, and a codec's smoothing where
+    lossy) :data:`ROTOR_SCALE_STDERR_COLOUR` and :data:`ROTOR_AMPLITUDE_STDERR_COLOUR_RAD`; a monochrome
+    camera's (every sticker ``"bright"``) :data:`ROTOR_SCALE_STDERR_MONO` and
+    :data:`ROTOR_AMPLITUDE_STDERR_MONO_RAD`.
+    """
+    if campaign.rotor is None:
+        return None
+    if all("bright" in pair for pair in campaign.rotor.blades):
+        return RotorSystematics(ROTOR_SCALE_STDERR_MONO, ROTOR_AMPLITUDE_STDERR_MONO_RAD,
+                                "a turning rotor's passes on monochrome footage: each sticker's sub-pixel "
+                                "bias, frozen through a pass, reads as a scale of the pitch (docs/rotor.md)")
+    lossy = sorted(set(_codecs(campaign)) & set(_LOSSY))
+    what = f"{', '.join(lossy)}-compressed colour footage" if lossy else "colour footage"
+    return RotorSystematics(ROTOR_SCALE_STDERR_COLOUR, ROTOR_AMPLITUDE_STDERR_COLOUR_RAD,
+                            f"a turning rotor's passes on {what}: each sticker's sub-pixel bias, frozen through a "
+                            "pass, reads as a scale of the pitch (slope 0.983-1.017 on the twin) and errs a "
+                            "dwell's amplitude by ~0.02° (docs/rotor.md)")
+
+
+def rotor_scale_error(campaign: Campaign) -> tuple[float, str] | None:
+    """(relative σ, why) of the pitch's scale for the runner's gain interval
+    (:func:`~servoscope.sysid.with_gain_scale_uncertainty`), or None for a static campaign."""
+    sys_ = rotor_systematics(campaign)
+    return None if sys_ is None else (sys_.scale_relative_stderr, sys_.why)
+
+
+def codec_warning(campaign: Campaign) -> str | None:
+    """A warning where the rotor's videos are lossy-compressed (the passes' pitch scale less sure), else None."""
+    codecs = sorted(set(_codecs(campaign)) & set(_LOSSY))
     if not codecs:
         return None
-    return (f"the rotor's videos are {', '.join(codecs)}: on the twin (H.264 at 40 Mbit/s, 320×240) the codec "
-            f"shrank the passes' pitch by 1.6-2.7 %, so the gain read that much low, beyond its interval "
-            f"(docs/rotor.md); a high-speed camera's raw or monochrome file does not (0.1-0.9 %)")
+    return (f"the rotor's videos are {', '.join(codecs)}: on the twin a codec moved the passes' pitch scale by "
+            f"-0.6 to +0.9 % against the same footage raw (H.264 at 0.03-0.33 bit per pixel), inside the "
+            f"±{100 * ROTOR_SCALE_STDERR_COLOUR:.1f} % (1σ) that colour footage's gain interval carries "
+            f"(docs/rotor.md)")
 
 
 def blades_by_colour(campaign: Campaign) -> bool:
@@ -167,6 +275,7 @@ def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) 
             entry["blade_differences"] = [d.summary() for d in fits[label].blade_differences]
         tests.append(entry)
     by_colour = blades_by_colour(campaign)
+    shared = rotor_systematics(campaign)
     differences = []
     for blade in range(1, len(campaign.rotor.blades)) if by_colour else ():
         values, errors = [], []
@@ -178,11 +287,21 @@ def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) 
                     errors.append(d.difference_stderr_rad)
         if not values:
             continue
-        mean, stderr = inverse_variance_mean(values, errors)  # the dwells' scatter widens it where larger
+        # The blades' constant bias is in every dwell's error (rotor_dwell_fits) but does not average over the
+        # dwells: pooled without it, then added back.
+        bias = 0.0 if shared is None else math.sqrt(2.0) * shared.amplitude_stderr_rad
+        random = [math.sqrt(max(e * e - bias * bias, 0.0)) or e for e in errors]
+        mean, spread = inverse_variance_mean(values, random)  # the dwells' scatter widens it where larger
+        stderr = math.hypot(spread, bias)
         n = len(values)
-        ci = interval95(mean, stderr, "student", dof=n - 1) if n > 1 else interval95(mean, stderr)
+        # A Student-t for what the few dwells' scatter tells, a normal for the bias's stated size.
+        half = math.hypot((interval95(0.0, spread, "student", dof=n - 1) if n > 1 else interval95(0.0, spread))[1],
+                          interval95(0.0, bias)[1])
+        ci = (mean - half, mean + half)
         differences.append({"blade": blade, "reference_blade": 0, "difference_rad": mean,
                             "difference_stderr_rad": stderr, "ci95_rad": [float(ci[0]), float(ci[1])],
                             "dwells": n})
     return {"blades": [list(b) for b in campaign.rotor.blades], "identified_by": "colour" if by_colour else "order",
-            "tests": tests, "blade_differences": differences}
+            "tests": tests, "blade_differences": differences,
+            # What the passes share beyond their stated errors, in the dwells' and the gain's intervals.
+            "systematic": None if shared is None else shared.summary()}

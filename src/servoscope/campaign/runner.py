@@ -27,7 +27,8 @@ from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dw
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
-from .rotor import codec_warning, pass_track, rotor_dwell_fits, rotor_step, rotor_summary, track_rotor_campaign
+from .rotor import (codec_warning, pass_track, rotor_dwell_fits, rotor_scale_error, rotor_step, rotor_summary,
+                    track_rotor_campaign)
 from .result import IdentificationResult
 from .step_test import step_test
 from .sweeps import combined_response, sweep_responses, sweeps_t0_stderr
@@ -414,7 +415,8 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     exposure = estimate_exposure([], campaign.exposure_s, None)
     amplitude = {t.label: t.amplitude for t in campaign.sine_tests}
     fr = dwell_response(campaign, fits, [amplitude[label] for label in fits], exposure)
-    model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, None)
+    # The passes' pitch scale (RotorSystematics): the gain's interval widened by it, as a plane's scale widens it.
+    model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, rotor_scale_error(campaign))
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
     step, step_label = rotor_step(campaign, tables, model, warnings)

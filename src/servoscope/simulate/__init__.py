@@ -10,11 +10,13 @@
   (a homography before the lens); :func:`render_board_photo` — a chessboard
   lying in that plane, photographed through it.
 * :func:`simulate_campaign` — videos + campaign.toml + camera.json + truth.json.
+* :func:`reencode_campaign` — a raw campaign's videos written again with a lossy codec (one render, many codecs).
 """
 
 from .board import render_board_photo
 from .campaign import simulate_campaign
 from .presets import PRESETS, CampaignPreset, PAPER_SERVO
+from .reencode import reencode_campaign
 from .render import FrameRenderer, polygon_coverage, render_frame
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
 from .servo import InputSignal, ServoModel
@@ -32,6 +34,7 @@ __all__ = [
     "led_exposure_fraction",
     "marker_angle_rad",
     "simulate_campaign",
+    "reencode_campaign",
     "CampaignPreset",
     "PRESETS",
     "PAPER_SERVO",

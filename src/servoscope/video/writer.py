@@ -338,6 +338,33 @@ class VideoWriter:
             frame = _planar_frame(encode_ycbcr(a, matrix=self._layout.matrix, full_range=self._layout.full_range,
                                                bit_depth=self._layout.bit_depth, factors=self._layout.factors),
                                   self.pix_fmt)
+        self._encode(frame, pts)
+        return float(pts * self.time_base)
+
+    def write_yuv420p(self, i420: np.ndarray) -> float:
+        """Append one frame given as its 8-bit planes, PyAV's yuv420p layout (the Y plane, then Cb, then Cr).
+
+        What :meth:`write` encodes after its RGB conversion, so a lossless (raw) file's frames re-encoded this
+        way give the same bytes as the frames written again (:func:`servoscope.simulate.reencode_campaign`).
+        For the writer's default samples only (yuv420p, limited range, BT.601); the frame's time as
+        :meth:`write`'s default, ``frames_written / fps``.
+        """
+        a = np.asarray(i420)
+        if a.dtype != np.uint8 or a.shape != (self.height * 3 // 2, self.width):
+            raise ServoscopeError(
+                f"{self.path}: yuv420p planes must be uint8 of shape {(self.height * 3 // 2, self.width)}, not "
+                f"{a.dtype} {a.shape}")
+        if self._layout is not None or self.color_range is not None or self.matrix is not None:
+            raise ServoscopeError(f"{self.path}: yuv420p planes are written as they are: not with camera options "
+                                  "(pix_fmt, color_range, matrix)")
+        pts = round(self.frames_written / (self.fps * self.time_base))
+        if self._last_pts is not None and pts <= self._last_pts:
+            raise ServoscopeError(f"{self.path}: frame {self.frames_written} is not after the previous one at time "
+                                  f"base {self.time_base}")
+        self._encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(a), format="yuv420p"), pts)
+        return float(pts * self.time_base)
+
+    def _encode(self, frame: av.VideoFrame, pts: int) -> None:
         if self.color_range is not None:
             frame.color_range = 2 if self.color_range == "pc" else 1
         if self.matrix is not None:
@@ -348,7 +375,6 @@ class VideoWriter:
             self._container.mux(packet)
         self.frames_written += 1
         self._last_pts = pts
-        return float(pts * self.time_base)
 
     def close(self) -> None:
         """Flush the encoder and close the file (idempotent)."""
