@@ -46,21 +46,20 @@ def backlash_identified(tmp_path_factory):
     return result, root / "out", servo
 
 
-# The files that take longest, longest first (pytest --durations=0 on a fresh clone on the 2-core machine,
-# 2026-11-26, session 8): `make test` hands whole files to its two workers in collection order, so starting the
+# The files that take longest, longest first (pytest --durations on a fresh clone on the 2-core machine,
+# 2026-11-26, session 9): `make test` hands whole files to its two workers in collection order, so starting the
 # long ones first lets the short ones fill in at the end and both workers finish together (longest processing
-# time first). The GPU simulator's file sits lower since its tests were trimmed (31 -> 18 s).
+# time first).
 LONGEST_FIRST = [
-    "campaign/test_identify_twin_h264.py", "sysid/test_servo_selection.py", "campaign/test_identify_twin_raw.py",
-    "campaign/test_identify_twin_mpeg2.py", "campaign/test_identify_twin_h264_gop.py", "test_identify_command.py",
-    "camera/test_timing_honesty.py", "campaign/test_rotor_identify.py", "sysid/test_modes.py",
-    "campaign/test_interrupted_run.py", "camera/test_exposure_blur.py", "sysid/test_sysid_identify.py",
-    "markers/test_gpu.py", "markers/test_monochrome.py", "campaign/test_identify_sweep.py",
-    "campaign/test_end_to_end.py", "campaign/test_joint_linear.py", "campaign/test_joint.py",
-    "campaign/test_plane_twin.py", "video/test_video_formats.py", "sysid/test_linearity.py",
-    "video/test_bad_videos.py", "campaign/test_campaign_parallel.py", "test_bench.py",
-    "markers/test_reference_markers.py", "simulate/test_twin_image_sequence.py", "campaign/test_blade_motions.py",
-    "video/test_memory.py", "camera/test_rolling_shutter.py",
+    "campaign/test_identify_twin_codecs.py", "campaign/test_identify_twin_raw.py", "campaign/test_rotor_identify.py",
+    "test_identify_command.py", "video/test_video_formats.py", "sysid/test_linearity.py",
+    "markers/test_monochrome.py", "campaign/test_identify_sweep.py", "sysid/test_sysid_identify.py",
+    "campaign/test_joint.py", "campaign/test_plane_twin.py", "camera/test_timing_honesty.py", "sysid/test_modes.py",
+    "campaign/test_interrupted_run.py", "camera/test_rolling_shutter.py", "markers/test_gpu.py",
+    "camera/test_exposure_blur.py", "campaign/test_end_to_end.py", "campaign/test_joint_linear.py",
+    "report/test_report_browser.py", "simulate/test_twin_image_sequence.py", "video/test_memory.py",
+    "markers/test_reference_markers.py", "campaign/test_blade_motions.py", "sysid/test_servo_selection.py",
+    "sysid/test_sysid_held.py", "test_cli_errors.py", "test_bench.py", "sysid/test_heave_traces.py",
 ]
 
 
