@@ -87,3 +87,23 @@ def test_rotor_mistakes_one_clear_error(tmp_path, rotor, says):
     message = str(err.value)
     assert message.startswith(str(path)) and says in message and "\n" not in message
     assert message.count("rotor") >= 1 and "problems" not in message  # one problem, said once
+
+
+def test_a_raw_colour_rotor_campaign_is_written_in_nut_and_read_at_its_frame_rate(tmp_path):
+    """Raw (lossless) colour at a high-speed camera's rate: NUT (AVI cannot time 2,000 frames/s), whose stream
+    states no average rate; the reader takes the frame interval from the timestamps, not FFmpeg's guess (the
+    time base, 64,000 frames/s), so the manifest's shutter check and every frame's time hold."""
+    from servoscope.campaign import load_campaign
+    from servoscope.simulate import simulate_campaign
+    from servoscope.video.reader import iter_frames, probe_video
+
+    toml = simulate_campaign(tmp_path / "c", "paper-rotor", 1, codec="raw", fps=2000, frequencies_hz=(6.0,),
+                             min_dwell_s=0.1, min_periods=0.5, pre_roll_s=0.02, settle_s=0.02, include_step=False,
+                             height=120)
+    campaign = load_campaign(toml)  # before: "exposure 25 µs longer than the frame interval (0.0156 ms)"
+    (test,) = campaign.tests
+    assert test.video.suffix == ".nut"
+    info = probe_video(test.video)
+    assert info.codec == "rawvideo" and info.frame_rate_hz == pytest.approx(2000.0)
+    times = [f.time_s for _, f in zip(range(5), iter_frames(test.video))]
+    assert times == pytest.approx([k / 2000.0 for k in range(5)])

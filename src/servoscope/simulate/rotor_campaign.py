@@ -24,6 +24,7 @@ from .._io import write_text_atomic
 from ..camera.model import CameraModel
 from ..campaign.sections import RotorSpec
 from ..errors import ServoscopeError
+from ..video.writer import container_suffixes
 from .manifest import TWIN_HEADER, twin_campaign
 from .presets import PAPER_SERVO, CampaignPreset
 from .rotor import RotorRig
@@ -142,7 +143,8 @@ def simulate_rotor_campaign(outdir: str | Path, preset: str = "paper-rotor", see
     fps = Fraction(p.fps).limit_denominator(1_000_000)
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    suffix = "" if p.monochrome else ".mp4"
+    # Raw (lossless) colour in NUT: AVI's container cannot time a high-speed camera's frames (4,000 frames/s).
+    suffix = "" if p.monochrome else ".nut" if p.codec == "raw" else container_suffixes(p.codec)[0]
     plan = _test_plan(p, suffix)
     streams = np.random.SeedSequence(seed).spawn(len(plan))
     tests = []

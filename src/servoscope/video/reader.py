@@ -26,6 +26,7 @@ import av
 import numpy as np
 
 from ..errors import ServoscopeError
+from .timestamps import rate_from_timestamps
 from .colour import layout_of_format
 from .frame_source import is_frame_source, to_rgb8, to_yuv420
 from .sources import iter_source, open_frame_source, prefetch
@@ -229,7 +230,7 @@ def probe_video(path: str | Path) -> VideoInfo:
         ctx = stream.codec_context
         if ctx.width <= 0 or ctx.height <= 0:
             raise ServoscopeError(f"{path}: video stream has no frame size")
-        rate = stream.average_rate or stream.guessed_rate
+        rate = stream.average_rate or rate_from_timestamps(path) or stream.guessed_rate
         duration = None
         if stream.duration is not None and stream.time_base is not None:
             duration = float(stream.duration * stream.time_base)
