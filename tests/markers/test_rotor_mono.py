@@ -76,3 +76,20 @@ def test_blades_by_order_refuses_a_missing_pass():
     seen[160:170, 0] = True
     spread = blades_by_order(s, 2)
     assert spread.seen[:, 0].sum() == 30 and spread.seen[:, 1].sum() == 30 and spread.seen[60:70, 1].all()
+
+
+def test_a_fixed_bright_blob_not_named_is_never_a_sticker(clip):
+    """The LED left unnamed (led=False) is a fixed bright blob in every frame: a sticker leaving the picture
+    was paired with it (5 of 77 frames, the trail on the LED). What stays put from frame to frame is not a
+    sticker: the same pairs as with the LED named, none of them on it."""
+    from servoscope.markers.passes_mono import scan_rotor_mono
+
+    rig, path, truth, table = clip
+    named = scan_rotor_mono(path, led=True)
+    blind = scan_rotor_mono(path, led=False)
+    led = np.asarray(named.led_xy_px)
+    for xy in (blind.lead_xy_px[:, 0], blind.trail_xy_px[:, 0]):
+        d = np.hypot(xy[:, 0] - led[0], xy[:, 1] - led[1])
+        assert not np.any(d < 6.0), np.flatnonzero(d < 6.0)
+    np.testing.assert_array_equal(np.isfinite(blind.lead_xy_px[:, 0, 0]), np.isfinite(named.lead_xy_px[:, 0, 0]))
+    np.testing.assert_array_equal(blind.lead_xy_px, named.lead_xy_px)

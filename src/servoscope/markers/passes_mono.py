@@ -12,12 +12,16 @@ camera's native samples, :func:`~servoscope.video.native.iter_native_frames`):
    frames; blades are looked for once it is found or given up). A frame with fewer than :data:`~servoscope.markers.passes.MIN_COARSE` samples
    above it is empty;
 2. the coarse samples' blobs: the two of the four largest most nearly side by side and
-   alike in size are the stickers (a fixed LED not given is told apart), the one on the right the
+   alike in size are the stickers, the one on the right the
    lead (the leading edge on the picture's right, as ``servoscope track`` reads "bright"
    markers); each measured by the monochrome kernel
    (:func:`~servoscope.markers.kernel_mono.track_frame_mono`: luma-only unmixing in the
    samples' own DN) over a disk that holds its motion blur. A sticker is whole when its
-   disk and ring lie inside the picture.
+   disk and ring lie inside the picture. A blob where the previous frame had one
+   (:data:`STATIC_COARSE_PX`) is not a sticker but something fixed: a lamp, a glint, an LED
+   the campaign does not name (the tip crosses a picture in a few frames, tens of pixels a
+   frame). Without that, a sticker leaving the picture was paired with such a blob (5 of 77
+   frames on the twin's clip with its LED not named).
 
 The blade is not known frame by frame: the sightings have one column, and the pipeline
 numbers the passes in time order, pass k blade k mod N (blade 0 the first seen; stated).
@@ -45,6 +49,9 @@ SUPPORT_MARGIN_PX = 1.0
 RING_PX = 1.0
 #: Least sticker/background contrast unmixed, in 8-bit DN (the mono engine's).
 MIN_CONTRAST_DN8 = 5.8
+#: A blob within this many coarse samples (4 px each) of one in the previous frame is fixed, not a sticker:
+#: a tip crossing a 320-px picture in ~10 frames moves ~8 coarse samples a frame (~3 at 10,000 frames/s).
+STATIC_COARSE_PX = 0.75
 
 
 def _coarse(frame) -> np.ndarray:
@@ -66,10 +73,12 @@ def _crop(frame, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
     return rows[:, x0:x1].astype(np.float64)
 
 
-def _sticker_pair(stats: np.ndarray, cents: np.ndarray) -> np.ndarray:
+def _sticker_pair(stats: np.ndarray, cents: np.ndarray, fixed: np.ndarray | None = None) -> np.ndarray:
     """The labels of a blade's two stickers among a frame's bright blobs: of the four largest, the pair most
-    nearly side by side (the chord lies along the rows: |Δy| < |Δx|/2) and alike in size; else the largest alone."""
-    top = 1 + np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:4]
+    nearly side by side (the chord lies along the rows: |Δy| < |Δx|/2) and alike in size; else the largest alone.
+    ``fixed``: a flag a label (0, the background, included), blobs that are not stickers."""
+    candidates = np.arange(1, stats.shape[0]) if fixed is None else 1 + np.flatnonzero(~fixed[1:])
+    top = candidates[np.argsort(stats[candidates, cv2.CC_STAT_AREA])[::-1][:4]]
     if top.size < 2:
         return top
     best, pair = math.inf, top[:2]
@@ -116,6 +125,7 @@ def scan_rotor_mono(path: str | Path, *, led: bool = True, led_near: tuple[float
     threshold = None
     level = None
     led_disk = None
+    previous = None  # the last frame's bright blobs' centroids (coarse samples)
     best = (0, None)
     prm = np.zeros((1, MONO_NP))
     res = np.zeros((1, K.NQ))
@@ -146,9 +156,18 @@ def scan_rotor_mono(path: str | Path, *, led: bool = True, led_near: tuple[float
             jj, ii = np.nonzero(mask)
             best = (count, (frame.index, 4.0 * ii.mean(), 4.0 * jj.mean()))
         looking = led and led_disk is None and frame.index < LED_TRIES
-        if count >= MIN_COARSE and not looking:
+        fixed = None
+        if count:
+            # Every frame with a bright sample: what stays put from frame to frame is not a sticker.
             n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
-            order = _sticker_pair(stats, cents)
+            if previous is not None and previous.size:
+                near = np.hypot(cents[:, None, 0] - previous[None, :, 0], cents[:, None, 1] - previous[None, :, 1])
+                fixed = near.min(axis=1) <= STATIC_COARSE_PX
+            previous = cents[1:].copy()
+        else:
+            previous = None
+        if count >= MIN_COARSE and not looking:
+            order = _sticker_pair(stats, cents, fixed)
             if order.size:
                 seen = True
             found = []
