@@ -19,6 +19,7 @@ from ..campaign.headline import SOURCE_KEYS
 from ..numbers import format_interval, format_value, format_with_uncertainty
 from ..camera.plane_map import recorded_points
 from ..sysid.model_text import PARAM_LABELS, model_equation
+from ..sysid.plotting import on_branch_deg
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..campaign.result import IdentificationResult
@@ -285,9 +286,7 @@ def frequency_response_section(result: "IdentificationResult", figures_dir) -> R
     # Each measured phase drawn on the model's branch (modulo 360°): the dwells' own unwrapping cannot
     # follow a dead time across dwells far apart in frequency (a rotor's 3, 8, 14 Hz: more than 180° apart).
     model_phase = model_phase_deg(model.transfer_function, omega_grid, tau)
-    phase = np.asarray(fr.phase_deg, dtype=float)
-    at_dwells = np.interp(2 * np.pi * np.asarray(fr.frequency_hz), omega_grid, model_phase)
-    phase = phase + 360.0 * np.round((at_dwells - phase) / 360.0)
+    phase = on_branch_deg(fr.phase_deg, np.interp(2 * np.pi * np.asarray(fr.frequency_hz), omega_grid, model_phase))
     fig = bode_figure(
         fr.frequency_hz,
         fr.gain,

@@ -18,6 +18,7 @@ from matplotlib import patheffects  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from ..sysid.plotting import (  # noqa: E402
+    on_branch_deg,
     plot_dwell,
     plot_dwell_residual,
     plot_gain,
@@ -266,7 +267,7 @@ def describing_function_figure(candidates, measured) -> Figure:
             phase = np.where(np.abs(df) > 0.05 * np.max(np.abs(df)), np.degrees(np.angle(df)), np.nan)
             # The measured phase's branch: the model's drawn beside it, not 360° away.
             ref = rows[0][3]
-            ax_p.plot(grid, phase + 360.0 * np.round((ref - phase) / 360.0), style, color=colour, lw=1)
+            ax_p.plot(grid, on_branch_deg(phase, ref), style, color=colour, lw=1)
     ax_g.set_xscale("log")
     ax_g.set_ylabel("gain")
     ax_p.set_ylabel("phase (deg)")

@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from ..campaign.compare import DIFFERS_Z, ResultComparison, load_static_result
 from ..errors import ServoscopeError
 from ..numbers import format_interval, format_with_uncertainty
+from ..sysid.plotting import on_branch_deg, plot_gain
 from .html import ReportSection
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -40,15 +41,12 @@ def beside_bode_figure(static: "IdentificationResult", rotating: "Identification
     for result, name, colour, marker in ((static, "static", "C0", "o"), (rotating, "rotating", "C3", "s")):
         fr, model = result.frequency_response, result.model
         w = 2 * np.pi * np.asarray(fr.frequency_hz)
-        gain_db = 20 * np.log10(np.asarray(fr.gain))
-        err_db = 20 / math.log(10) * np.asarray(fr.gain_stderr) / np.asarray(fr.gain)
-        ax.errorbar(w, gain_db, yerr=err_db, fmt=marker, ms=4.5, color=colour, capsize=2,
-                    label=f"{name}: measured ({len(w)} dwells)")
+        plot_gain(ax, w, fr.gain, fr.gain_stderr, label=f"{name}: measured ({len(w)} dwells)", color=colour,
+                  marker=marker, ms=4.5, capsize=2)
         ax.semilogx(omega, 20 * np.log10(model.magnitude(omega)), "-", color=colour, lw=1.1,
                     label=f"{name}: fitted model")
         # A measured phase is known modulo 360°: drawn on the model's branch, which runs on past −180°.
-        model_deg = np.degrees(model.phase_rad(w))
-        phase = np.asarray(fr.phase_deg) + 360.0 * np.round((model_deg - np.asarray(fr.phase_deg)) / 360.0)
+        phase = on_branch_deg(fr.phase_deg, model.phase_deg(w))
         axp.errorbar(w, phase, yerr=fr.phase_stderr_deg, fmt=marker, ms=4.5, color=colour, capsize=2,
                      label=f"{name}: measured")
         axp.plot(omega, np.degrees(model.phase_rad(omega)), "-", color=colour, lw=1.1, label=f"{name}: fitted model")

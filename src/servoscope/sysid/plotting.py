@@ -25,6 +25,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "new_axes",
+    "on_branch_deg",
     "plot_dwell",
     "plot_dwell_residual",
     "plot_gain",
@@ -45,8 +46,19 @@ def new_axes(ax: Axes | None) -> Axes:
     return ax
 
 
+def on_branch_deg(phase_deg: ArrayLike, reference_deg: ArrayLike) -> np.ndarray:
+    """``phase_deg`` moved by whole turns to the branch nearest ``reference_deg`` (a phase is known modulo 360°).
+
+    Where measured phases are drawn beside a model's continuous phase (a dead time takes it past −180°), or
+    a model's beside a measured one; NaN stays NaN.
+    """
+    phase = np.asarray(phase_deg, dtype=float)
+    return phase + 360.0 * np.round((np.asarray(reference_deg, dtype=float) - phase) / 360.0)
+
+
 def plot_gain(
-    ax: Axes, omega_rad_s: ArrayLike, gain: ArrayLike, gain_stderr: ArrayLike | None = None, *, label: str = "measured"
+    ax: Axes, omega_rad_s: ArrayLike, gain: ArrayLike, gain_stderr: ArrayLike | None = None, *, label: str = "measured",
+    color: str = "C0", marker: str = "o", ms: float = 5, capsize: float = 3,
 ) -> ErrorbarContainer:
     """Measured gains in dB against angular frequency, with ±1 standard error bars.
 
@@ -58,6 +70,8 @@ def plot_gain(
     gain_stderr : array_like, shape (n,), optional
         Standard errors of the gains (drawn in dB, first-order).
     label : str, default "measured"
+    color, marker, ms, capsize
+        The points' colour, marker and size, and the error bars' caps (two responses on one plot).
 
     Returns
     -------
@@ -68,7 +82,7 @@ def plot_gain(
     yerr = None
     if gain_stderr is not None:
         yerr = 20 / np.log(10) * np.asarray(gain_stderr) / np.asarray(gain)
-    return ax.errorbar(omega_rad_s, gain_db, yerr=yerr, fmt="o", ms=5, color="C0", capsize=3, label=label)
+    return ax.errorbar(omega_rad_s, gain_db, yerr=yerr, fmt=marker, ms=ms, color=color, capsize=capsize, label=label)
 
 
 def plot_model_gain(ax: Axes, omega_rad_s: ArrayLike, gain: ArrayLike, *, label: str = "fitted model") -> Line2D:
