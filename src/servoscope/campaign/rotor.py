@@ -24,7 +24,7 @@ from ..errors import ServoscopeError
 from ..markers.settings import TrackerSettings
 from ..markers.track import Track
 from ..parameters import interval95, inverse_variance_mean
-from ..pipeline.rotor import track_passes
+from ..pipeline.rotor import monochrome_blades, track_passes
 from ..sysid.pass_result import BladeDifference
 from ..sysid.pass_sine import fit_pass_sine
 from ..sysid.pass_step import analyse_pass_step
@@ -32,7 +32,8 @@ from .manifest import Campaign, TestSpec
 
 __all__ = ["ROTOR_AMPLITUDE_STDERR_COLOUR_RAD", "ROTOR_AMPLITUDE_STDERR_MONO_RAD", "ROTOR_SCALE_STDERR_COLOUR",
            "ROTOR_SCALE_STDERR_MONO", "RotorSystematics", "blades_by_colour", "codec_warning", "pass_track",
-           "rotor_dwell_fits", "rotor_scale_error", "rotor_step", "rotor_summary", "rotor_systematics",
+           "rotor_dwell_fits", "rotor_scale_error", "rotor_settings", "rotor_step", "rotor_summary",
+           "rotor_systematics",
            "track_rotor_campaign"]
 
 
@@ -57,7 +58,9 @@ def pass_track(table: PassTable, video: str) -> Track:
     )
 
 
-def _settings(campaign: Campaign) -> TrackerSettings:
+def rotor_settings(campaign: Campaign) -> TrackerSettings:
+    """How the campaign's rotor videos are read: its LED, lens, shutter and timestamps (``identify``'s and the
+    report's frame alike)."""
     return TrackerSettings(led=campaign.led, led_near=campaign.led_near, camera=campaign.camera,
                            exposure_s=campaign.exposure_s, readout_s=campaign.readout_s, timestamp=campaign.timestamp)
 
@@ -71,7 +74,7 @@ def track_rotor_campaign(campaign: Campaign, *, keep_going: bool = False, failur
     """
     if campaign.rotor is None:
         raise ServoscopeError(f"{campaign.path}: no [rotor] section: a static campaign is tracked by track_campaign")
-    settings = _settings(campaign)
+    settings = rotor_settings(campaign)
     tables: dict[str, PassTable] = {}
     for index, test in enumerate(campaign.tests):
         report = (lambda frames, label=test.label, i=index: progress(label, frames, i)) if progress else None
@@ -85,11 +88,13 @@ def track_rotor_campaign(campaign: Campaign, *, keep_going: bool = False, failur
     return tables
 
 
-def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings: list[str]) -> dict:
+def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings: list[str], *,
+                     shared: RotorSystematics | None = None) -> dict:
     """Each sine dwell's fit to its passes (label → :class:`~servoscope.sysid.pass_result.PassSineFit`), each
-    amplitude's error with the dwell's share of the passes' systematic error (:func:`rotor_systematics`)."""
+    amplitude's error with the dwell's share of the passes' systematic error (``shared``, default
+    :func:`rotor_systematics` of the campaign)."""
     n_blades = len(campaign.rotor.blades)
-    shared = rotor_systematics(campaign)
+    shared = shared or rotor_systematics(campaign)
     fits = {}
     for test in campaign.sine_tests:
         table = tables.get(test.label)
@@ -118,11 +123,11 @@ def rotor_dwell_fits(campaign: Campaign, tables: dict[str, PassTable], warnings:
     return fits
 
 
-def _with_blade_bias(d: BladeDifference, shared: "RotorSystematics") -> BladeDifference:
+def _with_blade_bias(d: BladeDifference, shared: RotorSystematics) -> BladeDifference:
     """``d`` with √2 × the blades' constant bias added to its error in quadrature, its interval widened alike."""
-    se = math.hypot(d.difference_stderr_rad, math.sqrt(2.0) * shared.amplitude_stderr_rad)
     if not (math.isfinite(d.difference_stderr_rad) and d.difference_stderr_rad > 0):
         return d
+    se = math.hypot(d.difference_stderr_rad, math.sqrt(2.0) * shared.amplitude_stderr_rad)
     half = 0.5 * (d.ci95_rad[1] - d.ci95_rad[0]) * se / d.difference_stderr_rad
     return replace(d, difference_stderr_rad=se, ci95_rad=(d.difference_rad - half, d.difference_rad + half))
 
@@ -184,11 +189,19 @@ class RotorSystematics:
         Each dwell's own amplitude error (rad): added to its amplitude's error before the fit.
     why : str
         The footage it was sized for, as the warnings say it.
+    lossy_codecs : tuple of str
+        The decoders of the campaign's lossy-compressed videos (:func:`codec_warning`).
     """
 
     scale_relative_stderr: float
     amplitude_stderr_rad: float
     why: str
+    lossy_codecs: tuple[str, ...] = ()
+
+    @property
+    def scale_error(self) -> tuple[float, str]:
+        """(relative σ, why) for the runner's gain interval (:func:`~servoscope.sysid.with_gain_scale_uncertainty`)."""
+        return self.scale_relative_stderr, self.why
 
     def summary(self) -> dict:
         """Plain values for result.json's ``rotor``."""
@@ -221,28 +234,30 @@ def rotor_systematics(campaign: Campaign) -> RotorSystematics | None:
     """
     if campaign.rotor is None:
         return None
-    if all("bright" in pair for pair in campaign.rotor.blades):
+    lossy = tuple(sorted(set(_codecs(campaign)) & set(_LOSSY)))  # the videos probed once, here
+    if monochrome_blades(campaign.rotor):
         return RotorSystematics(ROTOR_SCALE_STDERR_MONO, ROTOR_AMPLITUDE_STDERR_MONO_RAD,
                                 "a turning rotor's passes on monochrome footage: each sticker's sub-pixel "
-                                "bias, frozen through a pass, reads as a scale of the pitch (docs/rotor.md)")
-    lossy = sorted(set(_codecs(campaign)) & set(_LOSSY))
+                                "bias, frozen through a pass, reads as a scale of the pitch (docs/rotor.md)", lossy)
     what = f"{', '.join(lossy)}-compressed colour footage" if lossy else "colour footage"
     return RotorSystematics(ROTOR_SCALE_STDERR_COLOUR, ROTOR_AMPLITUDE_STDERR_COLOUR_RAD,
                             f"a turning rotor's passes on {what}: each sticker's sub-pixel bias, frozen through a "
                             "pass, reads as a scale of the pitch (slope 0.983-1.017 on the twin) and errs a "
-                            "dwell's amplitude by ~0.02° (docs/rotor.md)")
+                            "dwell's amplitude by ~0.02° (docs/rotor.md)", lossy)
 
 
 def rotor_scale_error(campaign: Campaign) -> tuple[float, str] | None:
     """(relative σ, why) of the pitch's scale for the runner's gain interval
     (:func:`~servoscope.sysid.with_gain_scale_uncertainty`), or None for a static campaign."""
-    sys_ = rotor_systematics(campaign)
-    return None if sys_ is None else (sys_.scale_relative_stderr, sys_.why)
+    shared = rotor_systematics(campaign)
+    return None if shared is None else shared.scale_error
 
 
-def codec_warning(campaign: Campaign) -> str | None:
-    """A warning where the rotor's videos are lossy-compressed (the passes' pitch scale less sure), else None."""
-    codecs = sorted(set(_codecs(campaign)) & set(_LOSSY))
+def codec_warning(campaign: Campaign, *, shared: RotorSystematics | None = None) -> str | None:
+    """A warning where the rotor's videos are lossy-compressed (the passes' pitch scale less sure), else None.
+    ``shared``: the campaign's :func:`rotor_systematics`, where already made."""
+    shared = shared or rotor_systematics(campaign)
+    codecs = [] if shared is None else list(shared.lossy_codecs)
     if not codecs:
         return None
     return (f"the rotor's videos are {', '.join(codecs)}: on the twin a codec moved the passes' pitch scale by "
@@ -254,11 +269,11 @@ def codec_warning(campaign: Campaign) -> str | None:
 def blades_by_colour(campaign: Campaign) -> bool:
     """Whether each blade has its own colours (else, on a monochrome camera's footage, the blades are told apart
     by their order in each video: blade 0 is that video's first seen, not the same blade in every video)."""
-    return len(set(campaign.rotor.blades)) == len(campaign.rotor.blades) and not any(
-        "bright" in pair for pair in campaign.rotor.blades)
+    return len(set(campaign.rotor.blades)) == len(campaign.rotor.blades) and not monochrome_blades(campaign.rotor)
 
 
-def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) -> dict:
+def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict, *,
+                  shared: RotorSystematics | None = None) -> dict:
     """result.json's ``rotor``.
 
     Its blades (``identified_by``: "colour" or "order"), each test's rev/s and passes and each dwell's
@@ -275,7 +290,7 @@ def rotor_summary(campaign: Campaign, tables: dict[str, PassTable], fits: dict) 
             entry["blade_differences"] = [d.summary() for d in fits[label].blade_differences]
         tests.append(entry)
     by_colour = blades_by_colour(campaign)
-    shared = rotor_systematics(campaign)
+    shared = shared or rotor_systematics(campaign)
     differences = []
     for blade in range(1, len(campaign.rotor.blades)) if by_colour else ():
         values, errors = [], []

@@ -27,7 +27,7 @@ from .dwells import amplitude_checks, dwell_response, exposure_corrected, fit_dw
 from .joint import check_nonlinear, predicted_step_fit_percent, servo_model, split_held
 from .manifest import Campaign, TestSpec, load_campaign
 from .plane_check import campaign_in_view, plane_summary
-from .rotor import (codec_warning, pass_track, rotor_dwell_fits, rotor_scale_error, rotor_step, rotor_summary,
+from .rotor import (codec_warning, pass_track, rotor_dwell_fits, rotor_step, rotor_summary, rotor_systematics,
                     track_rotor_campaign)
 from .result import IdentificationResult
 from .step_test import step_test
@@ -396,7 +396,8 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     failures: dict[str, str] = {}
     tables = track_rotor_campaign(campaign, keep_going=keep_going, failures=failures, progress=progress)
     warnings: list[str] = [f"{label}: left out: {reason}" for label, reason in failures.items()]
-    lossy = codec_warning(campaign)
+    systematics = rotor_systematics(campaign)  # what the passes share beyond their errors (videos probed once)
+    lossy = codec_warning(campaign, shared=systematics)
     if lossy:
         warnings.append(lossy)
     video = {t.label: t.video for t in campaign.tests}
@@ -406,7 +407,7 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
         own = own_t0_stderr.get(label)
         if own is not None:
             tables[label] = replace(table, t0_uncertainty_s=own)
-    fits = rotor_dwell_fits(campaign, tables, warnings)
+    fits = rotor_dwell_fits(campaign, tables, warnings, shared=systematics)
     if len(fits) < 3:
         raise ServoscopeError(f"{campaign.path}: only {len(fits)} dwell(s) could be fitted to the rotor's passes; "
                               f"identify fits a model to 3 or more frequencies (the warnings say why each was left out)")
@@ -416,7 +417,7 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     amplitude = {t.label: t.amplitude for t in campaign.sine_tests}
     fr = dwell_response(campaign, fits, [amplitude[label] for label in fits], exposure)
     # The passes' pitch scale (RotorSystematics): the gain's interval widened by it, as a plane's scale widens it.
-    model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, rotor_scale_error(campaign))
+    model = _fit_model(fr, order, fit_mode(fit, fr, campaign), bootstrap, held, systematics.scale_error)
     warnings.extend(fr.warnings)
     warnings.extend(w for w in model.warnings if w not in warnings)
     step, step_label = rotor_step(campaign, tables, model, warnings)
@@ -424,7 +425,7 @@ def _identify_rotor(campaign: Campaign, fit: str, order, bootstrap: int, held: _
     return IdentificationResult(
         campaign=campaign, tracks=tracks, sine_fits=fits, frequency_response=fr, model=model, step=step,
         step_label=step_label, warnings=warnings, exposure=exposure, shared_t0_stderr_s=shared_t0_s,
-        rotor=rotor_summary(campaign, tables, fits))
+        rotor=rotor_summary(campaign, tables, fits, shared=systematics))
 
 
 def identify(

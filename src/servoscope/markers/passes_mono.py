@@ -218,9 +218,9 @@ def scan_rotor_mono(path: str | Path, *, led: bool = True, led_near: tuple[float
                 right, left = sorted(found, key=lambda f: -f[0])
                 lead_xy, lsig = right[1][:2], right[1][2]
                 trail_xy, tsig = left[1][:2], left[1][2]
-        if looking:
-            # The LED: the bright blob of the first frame with no blade (or the one at led_near).
-            n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        if looking and count:
+            # The LED: the bright blob of the first frame with no blade (or the one at led_near), among the blobs
+            # labelled above.
             if n > 1:
                 if led_near is not None:
                     lab = 1 + int(np.argmin(np.hypot(4 * cents[1:, 0] - led_near[0], 4 * cents[1:, 1] - led_near[1])))

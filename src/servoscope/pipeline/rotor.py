@@ -31,7 +31,7 @@ from ..markers.passes_mono import scan_rotor_mono
 from ..markers.settings import TrackerSettings
 from ..video.reader import probe_video
 
-__all__ = ["blades_by_order", "passes_from_sightings", "track_passes"]
+__all__ = ["blades_by_order", "monochrome_blades", "passes_from_sightings", "scan_rotor", "track_passes"]
 
 
 def track_passes(path: str | Path, settings: TrackerSettings | None = None, *, rotor,
@@ -70,28 +70,10 @@ def track_passes(path: str | Path, settings: TrackerSettings | None = None, *, r
     settings = settings or TrackerSettings()
     info = probe_video(path)
     warnings: list[str] = []
-    led = settings.led
     if settings.readout_s > 0:
         warnings.append("rolling shutter: not corrected for a rotor's passes (the tip crosses the picture in "
                         "milliseconds; use a global shutter)")
-    n_mono = _monochrome_blades(rotor)
-    if n_mono:
-        # Bright stickers on every blade: found by brightness, the blades told by their order.
-        led_bright = led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS
-        if led is not None and not led_bright:
-            warnings.append(f"LED {led!r}: a coloured LED is not read on monochrome footage; no t0")
-            led = None
-        sightings = blades_by_order(scan_rotor_mono(path, led=led is not None, led_near=settings.led_near,
-                                                    progress=progress), n_mono)
-        if n_mono > 1:
-            warnings.append(f"monochrome: the {n_mono} blades are told apart by their order (blade 0 is the first "
-                            "seen); give each blade its own colours to know which is which")
-    else:
-        pairs = blade_colours(rotor)
-        if led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS:
-            warnings.append(f"LED {led!r}: a brightness LED is not read on colour footage of a rotor; no t0")
-            led = None
-        sightings = scan_rotor_video(path, pairs, led=led, led_near=settings.led_near, progress=progress)
+    sightings, led = scan_rotor(path, settings, rotor, progress=progress, warnings=warnings)
     table = passes_from_sightings(path, sightings, settings, rotor=rotor, warnings=warnings)
     own: list[str] = []
     clock = sightings.time_s + exposure_middle_offset_s(settings.timestamp, settings.exposure_s)
@@ -188,8 +170,43 @@ def _two_frame_variance(pairs, rate_prior: float, spread: float) -> float:
 FLOOR_PRIOR_DOF = 4
 
 
-def _monochrome_blades(rotor) -> int:
-    """The number of blades when every sticker is told by brightness (monochrome footage), else 0."""
+def scan_rotor(path: str | Path, settings: TrackerSettings, rotor, *, progress: Callable[[int], None] | None = None,
+               warnings: list[str] | None = None) -> tuple[RotorSightings, str | None]:
+    """Every frame of a rotor's video: each blade's stickers where seen, and the LED (the scan of :func:`track_passes`).
+
+    Monochrome footage (every sticker ``"bright"``): :func:`~servoscope.markers.passes_mono.scan_rotor_mono`,
+    the blades told apart by their order; colour: :func:`~servoscope.markers.passes.scan_rotor_video`, each
+    blade by its colours. An LED the footage cannot show (a coloured one on monochrome footage, a
+    brightness one on colour footage) is not read, with a warning appended to ``warnings``.
+
+    Returns
+    -------
+    (RotorSightings, str or None)
+        The sightings, and the LED read (None: none).
+    """
+    warnings = [] if warnings is None else warnings
+    led = settings.led
+    n_mono = monochrome_blades(rotor)
+    if n_mono:
+        # Bright stickers on every blade: found by brightness, the blades told by their order.
+        if led is not None and parse_colour(led, what="LED colour") not in BRIGHTNESS:
+            warnings.append(f"LED {led!r}: a coloured LED is not read on monochrome footage; no t0")
+            led = None
+        sightings = blades_by_order(scan_rotor_mono(path, led=led is not None, led_near=settings.led_near,
+                                                    progress=progress), n_mono)
+        if n_mono > 1:
+            warnings.append(f"monochrome: the {n_mono} blades are told apart by their order (blade 0 is the first "
+                            "seen); give each blade its own colours to know which is which")
+        return sightings, led
+    if led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS:
+        warnings.append(f"LED {led!r}: a brightness LED is not read on colour footage of a rotor; no t0")
+        led = None
+    return scan_rotor_video(path, blade_colours(rotor), led=led, led_near=settings.led_near, progress=progress), led
+
+
+def monochrome_blades(rotor) -> int:
+    """The number of blades when every sticker is told by brightness (``"bright"``/``"dark"``, any case: a
+    monochrome camera's footage, the blades told apart by their order), else 0. ``rotor``: a RotorSpec or its blades."""
     blades = getattr(rotor, "blades", rotor) or ()
     specs = []
     for b in blades:

@@ -26,12 +26,10 @@ from ..angle.geometry import angle_rad_from_centroids
 from ..angle.passes import foreshortening
 from ..camera.undistort import undistort_centroids
 from ..errors import ServoscopeError
-from ..markers.colour import BRIGHTNESS, parse_colour
 from ..markers.led_timing import exposure_middle_offset_s
-from ..markers.passes import blade_colours, scan_rotor_video, segment_passes
-from ..markers.passes_mono import scan_rotor_mono
+from ..markers.passes import segment_passes
 from ..markers.settings import TrackerSettings
-from ..pipeline.rotor import blades_by_order, passes_from_sightings
+from ..pipeline.rotor import passes_from_sightings, scan_rotor
 from ..video import iter_frames
 
 __all__ = ["MAX_CROPS", "PassOnFrame", "pass_frame_figure", "pass_on_frame"]
@@ -103,14 +101,6 @@ class PassOnFrame:
         return np.isfinite(self.lead_xy_px[:, 0]) & np.isfinite(self.trail_xy_px[:, 0])
 
 
-def _monochrome(rotor) -> int:
-    """The blade count when every sticker is told by brightness (monochrome footage), else 0."""
-    blades = getattr(rotor, "blades", rotor) or ()
-    specs = [s for b in blades for s in ((b["lead"], b["trail"]) if isinstance(b, dict) else tuple(b))]
-    bright = specs and all(isinstance(s, str) and s.strip().lower() in BRIGHTNESS for s in specs)
-    return len(blades) if bright else 0
-
-
 def _read_frames(path, first: int, last: int) -> np.ndarray:
     frames = []
     for frame in iter_frames(path):
@@ -148,15 +138,8 @@ def pass_on_frame(path: str | Path, rotor, settings: TrackerSettings | None = No
     """
     path = Path(path)
     settings = settings or TrackerSettings()
-    n_mono = _monochrome(rotor)
-    # The LED as identify reads it: its disk is kept out of the stickers' search, so the same passes are found.
-    led = settings.led
-    led_bright = led is not None and parse_colour(led, what="LED colour") in BRIGHTNESS
-    if n_mono:
-        sightings = blades_by_order(scan_rotor_mono(path, led=led_bright, led_near=settings.led_near), n_mono)
-    else:
-        sightings = scan_rotor_video(path, blade_colours(rotor), led=None if led_bright else led,
-                                     led_near=settings.led_near)
+    # identify's own scan (the LED's disk kept out of the stickers' search): the same passes are found.
+    sightings, _ = scan_rotor(path, settings, rotor)
     table = passes_from_sightings(path, sightings, settings, rotor=rotor)
     clock = sightings.time_s + exposure_middle_offset_s(settings.timestamp, settings.exposure_s)
     segments = {(p.blade, p.first_frame): p for p in segment_passes(sightings)}

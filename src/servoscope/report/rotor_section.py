@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..campaign.rotor import rotor_settings
 from ..errors import ServoscopeError
-from ..markers.settings import TrackerSettings
 from ..video import is_frame_source
 from ..video.frame_source import parse_frame_source
 from .html import ReportSection
@@ -131,10 +131,8 @@ def _frame_part(s: ReportSection, result: "IdentificationResult", label: str) ->
     if not path.exists() and not is_frame_source(path):
         s.text(f"The passes drawn on a frame are left out: {label}'s footage {path} is not there any more.")
         return
-    settings = TrackerSettings(led=c.led, led_near=c.led_near, camera=c.camera, exposure_s=c.exposure_s,
-                               timestamp=c.timestamp)
     try:
-        view = pass_on_frame(path, c.rotor, settings)
+        view = pass_on_frame(path, c.rotor, rotor_settings(c))
     except (ServoscopeError, OSError) as exc:
         s.text(f"The passes drawn on a frame are left out: {label}'s footage could not be read again ({exc}).")
         return

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from fractions import Fraction
 from pathlib import Path
 
 import av
@@ -70,13 +71,14 @@ def reencode_campaign(campaign: str | Path, out_dir: str | Path, *, codec: str =
         raise ServoscopeError(f"{out}: holds a campaign already; give an empty folder")
     rate = int(bit_rate if bit_rate is not None else get_preset(truth["preset"]).bit_rate)
     suffix = container_suffixes(codec)[0]
+    fps = Fraction(*video["fps_rational"])  # the rate simulate_campaign wrote at (a container may not state it)
     out.mkdir(parents=True, exist_ok=True)
     renamed: dict[str, str] = {}
     for test in truth["tests"]:
         name = test["video"]
         new_name = Path(name).stem + suffix
         renamed[name] = new_name
-        _reencode_video(src.parent / name, out / new_name, codec, rate, gop)
+        _reencode_video(src.parent / name, out / new_name, fps, codec, rate, gop)
     for item in src.parent.iterdir():  # camera.json, the board's photo, ...: everything but the videos
         if item.is_file() and item.name not in renamed and item.name not in ("campaign.toml", "truth.json"):
             shutil.copy2(item, out / item.name)
@@ -90,12 +92,11 @@ def reencode_campaign(campaign: str | Path, out_dir: str | Path, *, codec: str =
     return out / "campaign.toml"
 
 
-def _reencode_video(src: Path, dst: Path, codec: str, bit_rate: int, gop: int | None) -> None:
+def _reencode_video(src: Path, dst: Path, fps: Fraction, codec: str, bit_rate: int, gop: int | None) -> None:
     with av.open(str(src)) as container:
         stream = container.streams.video[0]
         if stream.codec_context.pix_fmt != "yuv420p":
             raise ServoscopeError(f"{src}: holds {stream.codec_context.pix_fmt}, not the writer's yuv420p")
-        fps = stream.average_rate
         with VideoWriter(dst, stream.width, stream.height, fps, codec=codec, bit_rate=bit_rate, gop=gop) as writer:
             for frame in container.decode(stream):
                 writer.write_yuv420p(frame.to_ndarray())

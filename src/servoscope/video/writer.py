@@ -357,10 +357,7 @@ class VideoWriter:
         if self._layout is not None or self.color_range is not None or self.matrix is not None:
             raise ServoscopeError(f"{self.path}: yuv420p planes are written as they are: not with camera options "
                                   "(pix_fmt, color_range, matrix)")
-        pts = round(self.frames_written / (self.fps * self.time_base))
-        if self._last_pts is not None and pts <= self._last_pts:
-            raise ServoscopeError(f"{self.path}: frame {self.frames_written} is not after the previous one at time "
-                                  f"base {self.time_base}")
+        pts = round(self.frames_written / (self.fps * self.time_base))  # write()'s default time
         self._encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(a), format="yuv420p"), pts)
         return float(pts * self.time_base)
 
