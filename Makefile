@@ -35,7 +35,7 @@ test: $(STAMP)
 	# (rendered twin campaigns) are made once. Bytecode is written even where the machine sets
 	# PYTHONDONTWRITEBYTECODE (this one does): else each of the suite's ~75 Python processes compiles
 	# numpy's, scipy's, numba's, matplotlib's... sources again (~6 s of CPU a process, ~95 s a run).
-	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n auto --dist loadfile
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
 
 clean:
 	rm -rf $(VENV) demo-out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -44,6 +45,26 @@ def backlash_identified(tmp_path_factory):
     result = identify(toml, workers=1, nonlinear="auto")
     write_report(result, root / "out")
     return result, root / "out", servo
+
+
+def pytest_configure(config):
+    """Under pytest-xdist, each test worker keeps to its own share of the cores.
+
+    The campaign API's default is one worker process per core the caller may run on
+    (:func:`servoscope.campaign.parallel.default_workers`), and the decoder's threads follow the same
+    count. With one test worker per core, each identification then started a Dask cluster of as many
+    processes as the machine has cores, and its decoders as many threads, on cores the other test
+    worker was using: the suite paid for the clusters and the contention and gained nothing. Pinned,
+    a test worker's default is what a user's is on a machine of that many cores (one core: in
+    process); the parallel path keeps its own tests, which ask for their workers.
+    """
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
+        return
+    cores = sorted(os.sched_getaffinity(0))
+    share = cores[int(worker[2:]) % count::count] if len(cores) >= count else [cores[int(worker[2:]) % len(cores)]]
+    os.sched_setaffinity(0, share)
 
 
 # The files that take longest, longest first (pytest --durations on a fresh clone on the 2-core machine,
