@@ -17,12 +17,16 @@ import numpy as np
 
 from ..errors import ServoscopeError
 
-__all__ = ["FRAMES_FORMATS", "MRAW_NAME", "MrawWriter", "TiffSequenceWriter", "pack_12bit"]
+__all__ = ["FRAMES_FORMATS", "MRAW_NAME", "MrawWriter", "TIFF_ZLIB_LEVEL", "TiffSequenceWriter", "pack_12bit"]
 
 #: Image-sequence formats the twin writes: name → (file suffix, bits).
 FRAMES_FORMATS = {"tiff16": (".tif", 16)}
 #: The twin's MRAW in a test's folder: ``<folder>/frames.mraw`` with ``frames.cih`` beside it.
 MRAW_NAME = "frames"
+#: zlib level of the TIFF frames (lossless at any level). A sensor's noise leaves little for zlib to find:
+#: level 1 writes a 720×576 16-bit RGB frame in 18 ms against the default level's 97 ms (a 320×256 12-bit
+#: monochrome one in 2.8 against 4.6 ms) for 3 % (0.5 %) more bytes, and reads as fast.
+TIFF_ZLIB_LEVEL = 1
 
 
 class TiffSequenceWriter:
@@ -68,7 +72,8 @@ class TiffSequenceWriter:
             raise ServoscopeError(f"{self.folder}: an image sequence's frames are evenly spaced; frame "
                                   f"{self.frames_written} is at {t} s, not {time_s} s")
         tifffile.imwrite(self.folder / f"frame_{self.frames_written:06d}.tif", a.astype(np.uint16) * np.uint16(257),
-                         photometric="rgb", compression="zlib")
+                         photometric="rgb", compression="zlib",
+                         compressionargs={"level": TIFF_ZLIB_LEVEL})
         self.frames_written += 1
         return t
 
@@ -91,7 +96,7 @@ class TiffSequenceWriter:
             raise ServoscopeError(f"{self.folder}: an image sequence's frames are evenly spaced; frame "
                                   f"{self.frames_written} is at {t} s, not {time_s} s")
         tifffile.imwrite(self.folder / f"frame_{self.frames_written:06d}.tif", a, photometric="minisblack",
-                         compression="zlib")
+                         compression="zlib", compressionargs={"level": TIFF_ZLIB_LEVEL})
         self.frames_written += 1
         return t
 
