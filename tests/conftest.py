@@ -72,7 +72,7 @@ def pytest_configure(config):
 # long ones first lets the short ones fill in at the end and both workers finish together (longest processing
 # time first).
 LONGEST_FIRST = [
-    "campaign/test_identify_twin_codecs.py", "campaign/test_identify_twin_raw.py", "campaign/test_rotor_identify.py",
+    "campaign/test_identify_twin_paper.py", "campaign/test_rotor_identify.py",
     "test_identify_command.py", "video/test_video_formats.py", "sysid/test_linearity.py",
     "markers/test_monochrome.py", "campaign/test_identify_sweep.py", "sysid/test_sysid_identify.py",
     "campaign/test_joint.py", "campaign/test_plane_twin.py", "camera/test_timing_honesty.py", "sysid/test_modes.py",

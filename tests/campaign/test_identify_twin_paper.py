@@ -1,9 +1,12 @@
-"""Identification on lossy twin footage: H.264 at a camcorder's bit rate, with a camcorder's GOP, and MPEG-2.
+"""Identification against truth on the paper scene's twin footage: uncompressed, and encoded three ways.
 
-One scene (the `paper` preset, seed 1, eight dwells from 0.5 to 15 Hz, no step) rendered once, raw, and
+One scene (the `paper` preset, seed 1, eight dwells from 0.5 to 15 Hz and the step) rendered once, raw, and
 its videos encoded three ways (`reencode_campaign`: byte for byte what rendering with each codec writes,
-tests/simulate/test_reencode.py), so that what differs between the three is the codec alone.
+tests/simulate/test_reencode.py), so that what differs between them is the codec alone.
 
+* **Uncompressed**: what is tested is the chain footage → tracks → fits and its stated uncertainty: the
+  issue's accuracy targets and 95 % intervals that hold the truth; two more seeds of short dwells check the
+  intervals' coverage and that they say something.
 * **H.264 at 20 Mbit/s** (720×576, 100 frames/s) shrinks the smallest sticker motions: the 15 Hz dwell
   (±1 px of marker motion) reads 1.6–2.2 % low, 15–25 times its own standard error, and pulls ωn down
   (docs/accuracy.md, "Identification: stated uncertainty"). The Jacobian cannot see an error that a
@@ -36,7 +39,7 @@ from servoscope.simulate import reencode_campaign, simulate_campaign
 def paper_raw(tmp_path_factory):
     """The scene, rendered once (lossless)."""
     return simulate_campaign(tmp_path_factory.mktemp("paper_raw"), preset="paper", seed=1, codec="raw",
-                             frequencies_hz=tuple(np.geomspace(0.5, 15.0, 8)), include_step=False)
+                             frequencies_hz=tuple(np.geomspace(0.5, 15.0, 8)))
 
 
 # --- H.264 at 20 Mbit/s ---------------------------------------------------------------------------------------
@@ -188,3 +191,81 @@ def test_mpeg2_report_shows_the_codec_check(mpeg2_result, tmp_path):
     assert "<td>codec</td>" in row
     top = result.sine_fits["dwell_08_15.00Hz"]
     assert f"({top.n_intra} I-frames)" in row and row.count(" % ± ") == 1
+
+
+# --- Uncompressed ---------------------------------------------------------------------------------------------
+# Short dwells (1.2 s of steady state, no step test) keep two more seeds cheap.
+SHORT = dict(
+    codec="raw", frequencies_hz=tuple(np.geomspace(0.8, 15.0, 6)), pre_roll_s=0.2, settle_s=0.3,
+    min_dwell_s=1.2, min_periods=0.0, include_step=False,
+)
+
+
+@pytest.fixture(scope="module")
+def short_campaigns(tmp_path_factory):
+    return [simulate_campaign(tmp_path_factory.mktemp(f"short{s}"), preset="paper", seed=s, **SHORT) for s in (1, 3)]
+
+
+_TRACKS: dict = {}
+
+
+def _tracked(campaign):
+    """The campaign and its tracks, tracked once for both fit modes (tracking is the cost, not what differs)."""
+    from servoscope.campaign import track_campaign
+
+    if campaign not in _TRACKS:
+        loaded = load_campaign(campaign)
+        _TRACKS[campaign] = (loaded, track_campaign(loaded))
+    return _TRACKS[campaign]
+
+
+def _names(fit):
+    return ["gain", "natural_frequency_rad_s", "damping_ratio"] + (["dead_time_s"] if fit == "complex" else [])
+
+
+def _errors(campaign, fit, model=None):
+    """(name, error / half-width of the 95 % interval) per parameter; prints σ-errors."""
+    truth = json.loads((campaign.parent / "truth.json").read_text())
+    if model is None:
+        loaded, tracks = _tracked(campaign)
+        model = identify(loaded, tracks=tracks, fit=fit).model
+    out = []
+    for name in _names(fit):
+        value, (low, high) = model.params[name], model.ci95[name]
+        true = truth["model"][name]
+        stderr = model.stderr[name]
+        print(f"{campaign.parent.name} {fit} {name}: {value:.6g}, 95 % [{low:.6g}, {high:.6g}], truth {true}, "
+              f"error {(value - true) / stderr:+.2f} σ")
+        assert low < value < high and stderr > 0
+        assert low <= true <= high, (campaign, fit, name, low, true, high)
+        out.append((name, abs(value - true) / (0.5 * (high - low))))
+    return model, truth, out
+
+
+@pytest.mark.parametrize("fit", ["magnitude", "complex"])
+def test_paper_model_and_intervals(paper_raw, fit):
+    loaded, tracks = _tracked(paper_raw)
+    result = identify(loaded, tracks=tracks, fit=fit)
+    model = result.model
+    truth = json.loads((paper_raw.parent / "truth.json").read_text())
+    # The stated 95 % intervals contain the truth (HAC per-dwell errors,
+    # covariance scaled by max(1, χ²/dof)); see docs/accuracy.md.
+    _errors(paper_raw, fit, model)
+    # The issue's accuracy targets: K, ωn within 1 %, ζ within 3 %, bandwidth 1 %, τ 2 ms.
+    assert model.params["gain"] == pytest.approx(truth["model"]["gain"], rel=0.01)
+    assert model.params["natural_frequency_rad_s"] == pytest.approx(truth["model"]["natural_frequency_rad_s"], rel=0.01)
+    assert model.params["damping_ratio"] == pytest.approx(truth["model"]["damping_ratio"], rel=0.03)
+    assert model.bandwidth_rad_s == pytest.approx(truth["bandwidth_rad_s"], rel=0.01)
+    assert result.dead_time_s == pytest.approx(truth["model"]["dead_time_s"], abs=0.002)
+
+
+@pytest.mark.parametrize("fit", ["magnitude", "complex"])
+def test_intervals_contain_truth_over_seeds(short_campaigns, fit):
+    for campaign in short_campaigns:
+        model, truth, errs = _errors(campaign, fit)
+        assert model.params["natural_frequency_rad_s"] == pytest.approx(truth["model"]["natural_frequency_rad_s"], rel=0.01)
+        # The intervals stay well inside the issue's accuracy targets: they
+        # say something (K, ωn to better than ±0.5 %, ζ ±1.5 %).
+        for name, limit in (("gain", 0.005), ("natural_frequency_rad_s", 0.005), ("damping_ratio", 0.015)):
+            low, high = model.ci95[name]
+            assert (high - low) / 2 < limit * truth["model"][name], (name, low, high)
