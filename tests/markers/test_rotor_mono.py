@@ -47,7 +47,7 @@ def test_mono_passes_against_truth(clip):
     err = table.pitch_rad - true
     assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.01  # measured 0.003° (docs/rotor.md)
     z = err / table.pitch_stderr_rad
-    assert 0.3 < math.sqrt(np.mean(z ** 2)) < 1.5
+    assert 0.6 < math.sqrt(np.mean(z ** 2)) < 1.3
     assert any("told apart by their order" in w for w in table.warnings)
     t = table.time_s
     span = (rig.azimuth_rad(t.max(), 0) - rig.azimuth_rad(t.min(), 0)) / (2 * np.pi * (t.max() - t.min()))
@@ -93,3 +93,35 @@ def test_a_fixed_bright_blob_not_named_is_never_a_sticker(clip):
         assert not np.any(d < 6.0), np.flatnonzero(d < 6.0)
     np.testing.assert_array_equal(np.isfinite(blind.lead_xy_px[:, 0, 0]), np.isfinite(named.lead_xy_px[:, 0, 0]))
     np.testing.assert_array_equal(blind.lead_xy_px, named.lead_xy_px)
+
+
+@pytest.fixture(scope="module")
+def short_clip(tmp_path_factory):
+    """30 rev/s at 2,000 frames/s: every pass 2-3 frames with both stickers whole."""
+    rig = RotorRig(blades=ROTOR_BLADE_COLOURS[:2], rev_per_s=30.0, blade_offsets_rad=OFFSETS, azimuth0_rad=0.9,
+                   drift_fraction=0.003, cyclic_rad=0.0)
+    path = tmp_path_factory.mktemp("rotor_mono_short") / "clip"
+    truth = render_rotor_clip(path, rig, collective, duration_s=0.4, fps=2000, exposure_s=EXPOSURE_S, width=320,
+                              height=240, led_off_s=0.1, noise_seed=7, background_seed=7, monochrome=True,
+                              bit_depth=12)
+    table = track_passes(next(path.glob("*.cih")), TrackerSettings(lead="bright", trail="bright", led="bright",
+                                                                   exposure_s=EXPOSURE_S), rotor=BRIGHT)
+    return rig, truth, table
+
+
+def test_mono_short_passes_fit_k_jointly(short_clip):
+    """k from passes of 2-3 frames, each weighed by what it tells (angle/pass_k.py): 1.39 ± 0.06 against the
+    pinhole's 1.44 (the pooled residual read 1.71 ± 0.25: the pitch's own rate through a pass taken for
+    curvature); the pitch per pass 0.006° RMS (0.008° before)."""
+    rig, _, table = short_clip
+    assert (table.n_whole < 4).all() and len(table) >= 20
+    k_rig = (rig.camera_distance_m + rig.tip_radius_m) / (2 * (rig.camera_distance_m - rig.tip_radius_m))
+    assert abs(table.foreshortening_k - k_rig) < max(0.15, 3 * table.foreshortening_k_stderr)
+    assert table.foreshortening_k_stderr < 0.1
+    errs = []
+    for rot in range(2):  # blades by order: the labelling that matches
+        errs.append(table.pitch_rad - (collective(table.time_s) + np.array(OFFSETS)[(table.blade + rot) % 2]))
+    err = min(errs, key=lambda e: float(np.mean(e ** 2)))
+    assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.0075
+    z = err / table.pitch_stderr_rad
+    assert 0.6 < math.sqrt(np.mean(z ** 2)) < 1.3

@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from .pass_k import pitch_rate_spread_rad_s
 from .passes import PassFit, foreshortening
 
 __all__ = ["MIN_SHORT_FRAMES", "fit_short_pass", "pitch_rate_spread_rad_s", "pooled_crossing_times",
@@ -77,46 +78,6 @@ def pooled_crossing_times(time_s: NDArray[np.float64], x_mid_px: NDArray[np.floa
         return tc, np.full(n_pass, math.nan)
     cov = np.linalg.pinv(A.T @ A) * float(r @ r) / dof
     return tc, np.sqrt(np.clip(np.diag(cov)[:n_pass], 0.0, None))
-
-
-def pitch_rate_spread_rad_s(time_s: NDArray[np.float64], pitch_rad: NDArray[np.float64],
-                            blade: NDArray[np.int64], noise_rad: float = 0.0) -> float:
-    """The RMS of the pitch's rate over the clip, from consecutive passes' pitches (each blade's mean taken out).
-
-    A short pass holds its own rate at 0; this is the rate's spread its error takes on. The
-    consecutive passes' differences over their time apart are the rate between them (a sine
-    of frequency f sampled h apart: its rate times sin(πfh)/(πfh), 0.81 at 14 Hz and 25 ms);
-    their mean square less the pitches' own noise's share (2·noise²/h²).
-
-    Parameters
-    ----------
-    time_s, pitch_rad : ndarray
-        Every pass's time (s) and pitch (rad).
-    blade : ndarray of int
-    noise_rad : float
-        A pass's pitch error (rad, typical).
-
-    Returns
-    -------
-    float
-        rad/s; 0 with fewer than 3 passes.
-    """
-    t = np.asarray(time_s, dtype=np.float64)
-    p = np.asarray(pitch_rad, dtype=np.float64).copy()
-    b = np.asarray(blade, dtype=np.int64)
-    ok = np.isfinite(t) & np.isfinite(p)
-    if ok.sum() < 3:
-        return 0.0
-    t, p, b = t[ok], p[ok], b[ok]
-    for k in np.unique(b):
-        p[b == k] -= p[b == k].mean()
-    order = np.argsort(t)
-    dt, dp = np.diff(t[order]), np.diff(p[order])
-    good = dt > 0
-    if not good.any():
-        return 0.0
-    ms = float(np.mean((dp[good] / dt[good]) ** 2) - np.mean(2.0 * noise_rad ** 2 / dt[good] ** 2))
-    return math.sqrt(max(ms, 0.0))
 
 
 def pooled_slope_rad_s(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_c_s: NDArray[np.float64],

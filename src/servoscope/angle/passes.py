@@ -33,18 +33,18 @@ The estimator (:func:`fit_passes`), documented in docs/rotor.md:
    corrected, θ_k = atan(tan φ_k / F(ψ_k)), and a straight line θ_k = θ0 + θ1·(t_k − t_c)
    fitted through the pass (the pitch's own change through it), one pass of 4-MAD
    outlier rejection; ``k`` common to every pass (it is the camera's geometry) and
-   fitted by minimising the passes' pooled residual. θ0 is the pitch at ψ = 0.
+   fitted by minimising the passes' pooled residual (:mod:`servoscope.angle.pass_k`; with short
+   passes among them, each weighed by what it tells). θ0 is the pitch at ψ = 0.
    Its standard error (:func:`with_pass_error`): the line's intercept error, with the
    crossing time's error through θ1 and ``k``'s error through the correction; and what a
    pass's frames share (the stickers cross the same rows in every frame of a pass, so each
    sticker's vertical sub-pixel bias is frozen through it and does not average): a null
    channel measures it, the stickers' midpoint height at ψ = 0 from pass to pass
-   (:func:`midpoint_variance_rad2`), pooled over the blades and shrunk towards one frame's
-   residual variance (:func:`frame_variance_rad2`) where the passes are few
-   (:func:`servoscope.pipeline.rotor.track_passes`).
+   (:func:`midpoint_variance_rad2`), pooled over the blades and shrunk towards a prior where the
+   passes are few (:mod:`servoscope.angle.pass_error`).
 5. **Short passes** (2–3 frames with both stickers whole, :mod:`servoscope.angle.pass_short`):
    their crossing time from the path the blade's every pass follows, ``k`` common, their own
-   rate held at 0 with its spread in their error.
+   rate shrunk towards the passes' pooled slope with its remaining error in theirs.
 """
 
 from __future__ import annotations
@@ -56,34 +56,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ServoscopeError
-from .pass_table import ORTHOGRAPHIC_K, PassTable
+from .pass_k import MIN_PASS_FRAMES, fit_k_mixed, foreshortening
+from .pass_table import PassTable
 
-__all__ = ["PassFit", "PassTable", "centre_column", "crossing_time", "fit_pass", "fit_passes",
+__all__ = ["MIN_PASS_FRAMES", "PassFit", "PassTable", "centre_column", "crossing_time", "fit_pass", "fit_passes",
            "foreshortening", "frame_variance_rad2", "midpoint_variance_rad2", "rotor_speed", "with_pass_error"]
 
 #: Residuals beyond this many robust σ (1.4826·MAD) are dropped from a pass's line (once).
 OUTLIER_MADS = 4.0
-#: Fewest frames with both stickers whole for a pass's own line (fewer, down to 2: a short pass,
-#: :mod:`servoscope.angle.pass_short`).
-MIN_PASS_FRAMES = 4
-
-
-def foreshortening(psi_rad: NDArray[np.float64] | float, k: float) -> NDArray[np.float64]:
-    """F(ψ) = 1 / cos(√(2k)·ψ): how much a pass's image angle's tangent exceeds the pitch's at azimuth ψ.
-
-    Parameters
-    ----------
-    psi_rad : array_like
-        Azimuth from the camera (rad).
-    k : float
-        The curvature of F at ψ = 0 (F ≈ 1 + k·ψ²): ½ orthographic, (D + R)/(2(D − R)) for a
-        pinhole at D from the axis and a tip at radius R.
-
-    Returns
-    -------
-    ndarray
-    """
-    return 1.0 / np.cos(math.sqrt(2.0 * max(k, 0.0)) * np.asarray(psi_rad, dtype=np.float64))
 
 
 def centre_column(x_mid_px: NDArray[np.float64], separation_px: NDArray[np.float64],
@@ -350,8 +330,8 @@ def fit_pass(time_s: NDArray[np.float64], angle_rad: NDArray[np.float64], t_c_s:
 
 def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_c_s: NDArray[np.float64],
                rev_per_s: float, *, t_c_stderr_s: NDArray[np.float64] | None = None,
-               k: float | None = None, shared_error: bool = True,
-               k_min_frames: int = MIN_PASS_FRAMES) -> tuple[list[PassFit], float, float]:
+               k: float | None = None, shared_error: bool = True, k_min_frames: int = MIN_PASS_FRAMES,
+               blade: NDArray[np.int64] | None = None) -> tuple[list[PassFit], float, float]:
     """Every pass's pitch at ψ = 0, the foreshortening's ``k`` fitted common to them.
 
     Parameters
@@ -372,7 +352,10 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
         Passes of at least this many frames (and fewer than :data:`MIN_PASS_FRAMES`) tell ``k``
         too, each by its frames' mean (its own rate held at 0: odd in ψ, it does not bias the
         even correction); their pitch is :func:`servoscope.angle.pass_short.fit_short_pass`'s
-        (None here).
+        (None here). With short passes among them ``k`` is :func:`~servoscope.angle.pass_k.fit_k_mixed`'s
+        (each short pass weighed by what it tells, its own rate a random effect).
+    blade : ndarray of int, optional
+        Each pass's blade (its pitch offset out of the rate's spread, :func:`~servoscope.angle.pass_k.fit_k_mixed`).
 
     Returns
     -------
@@ -386,7 +369,8 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
                if np.size(t) >= min(k_min_frames, MIN_PASS_FRAMES) and np.isfinite(t_c[i])]
     k_stderr = math.nan
     if k is None:
-        k, k_stderr = _fit_k([passes[i] for i in telling], t_c[telling], rev_per_s)
+        k, k_stderr = fit_k_mixed([passes[i] for i in telling], t_c[telling], rev_per_s,
+                                  None if blade is None else np.asarray(blade)[telling])
     fits = [fit_pass(*passes[i], t_c[i], rev_per_s, k, t_c_stderr_s=err[i],
                      k_stderr=0.0 if not math.isfinite(k_stderr) else k_stderr) for i in usable]
     if shared_error and fits:
@@ -470,49 +454,3 @@ def with_pass_error(fits: list[PassFit], variance_rad2: float, *, add_line: bool
         total = line2 + variance_rad2 if add_line else max(line2, variance_rad2)
         out.append(replace(f, pitch_stderr_rad=math.sqrt(total + rest)))
     return out
-
-
-#: The range ``k`` is searched in: 0 (no foreshortening) to a camera 1.05 tip radii from the axis.
-K_RANGE = (0.0, 25.0)
-
-
-def _fit_k(passes, t_c: np.ndarray, rev_per_s: float) -> tuple[float, float]:
-    """``k`` minimising the passes' pooled line residuals; (½, NaN) when they do not tell it."""
-    from scipy.optimize import minimize_scalar
-
-    if not passes:
-        return ORTHOGRAPHIC_K, math.nan
-    taus = [np.asarray(t, dtype=float) - tc for (t, _), tc in zip(passes, t_c)]
-    phis = [np.asarray(p, dtype=float) for _, p in passes]
-    n = sum(x.size for x in taus)
-    # A pass of fewer than MIN_PASS_FRAMES frames: its mean alone (its own rate held at 0).
-    lines = [x.size >= MIN_PASS_FRAMES for x in taus]
-    dof = n - sum(2 if ln else 1 for ln in lines) - 1
-    if dof < 3:
-        return ORTHOGRAPHIC_K, math.nan
-
-    def rss(k: float) -> float:
-        total = 0.0
-        for tau, phi, ln in zip(taus, phis, lines):
-            theta = np.arctan(np.tan(phi) / foreshortening(2.0 * math.pi * rev_per_s * tau, k))
-            A = np.c_[np.ones(tau.size), tau] if ln else np.ones((tau.size, 1))
-            coef, *_ = np.linalg.lstsq(A, theta, rcond=None)
-            r = theta - A @ coef
-            total += float(r @ r)
-        return total
-
-    grid = np.linspace(*K_RANGE, 51)
-    vals = [rss(g) for g in grid]
-    j = int(np.argmin(vals))
-    lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
-    res = minimize_scalar(rss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-5})
-    k = float(res.x)
-    h = 0.05
-    r0, rp, rm = rss(k), rss(k + h), rss(max(k - h, 0.0))
-    curv = (rp + rm - 2.0 * r0) / (h * h)
-    if not curv > 0:
-        return ORTHOGRAPHIC_K, math.nan
-    stderr = math.sqrt(2.0 * (r0 / dof) / curv)
-    if stderr > max(1.0, k):  # the passes do not tell the curvature (pitch near 0, short passes)
-        return ORTHOGRAPHIC_K, math.nan
-    return k, stderr

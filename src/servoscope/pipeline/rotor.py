@@ -19,8 +19,9 @@ import numpy as np
 from ..angle.geometry import angle_rad_from_centroids
 from ..angle.pass_short import (MIN_SHORT_FRAMES, fit_short_pass, pitch_rate_spread_rad_s, pooled_crossing_times,
                                 pooled_slope_rad_s)
+from ..angle.pass_error import pooled_frame_variance_rad2, shared_pass_errors, two_frame_variance_rad2
 from ..angle.passes import (MIN_PASS_FRAMES, PassTable, centre_column, crossing_time, fit_passes, foreshortening,
-                            MIN_NULL_PASSES, midpoint_variance_rad2, rotor_speed, with_pass_error)
+                            rotor_speed)
 from ..camera.undistort import undistort_centroids
 from ..errors import ServoscopeError
 from ..markers.colour import BRIGHTNESS, parse_colour
@@ -85,89 +86,6 @@ def track_passes(path: str | Path, settings: TrackerSettings | None = None, *, r
         if sightings.led_xy_px is None:
             own.append("LED not found in a frame without a blade: no input start (t0)")
     return replace(table, t0_s=t0_s, t0_uncertainty_s=t0_unc, warnings=tuple(table.warnings) + tuple(own))
-
-
-def _shared_errors(good, fits, lead, trail, clock, warnings: list[str], fallback_rad2: float = 0.0):
-    """Each pass's pitch error with what its frames share: the midpoint null channel, pooled over the blades.
-
-    Each blade's passes give the midpoint's residual variance (:func:`midpoint_variance_rad2`); they
-    are pooled over the blades (one camera, alike stickers) and shrunk towards the frames' floor
-    (:func:`~servoscope.angle.passes.frame_variance_rad2`) with the weight of :data:`FLOOR_PRIOR_DOF` degrees of
-    freedom, so
-    that a short clip's few passes do not make a small error from a lucky variance. A short pass
-    (fewer than :data:`MIN_PASS_FRAMES` whole frames, its pitch the frames' mean) adds the frames'
-    own scatter its fewer frames leave: one frame's variance times 1/n less 1/n̄ (n̄ the passes'
-    harmonic mean frames, what the null channel's variance is of).
-    """
-    done = [f for f in fits if f is not None]
-    floor = _frame_variance(done, fallback_rad2)
-    total, dof_total = 0.0, 0
-    for b in sorted({p.blade for p in good}):
-        mine = [j for j, p in enumerate(good) if p.blade == b and fits[j] is not None]
-        heights, seps = [], []
-        taus = [clock[good[j].whole] - fits[j].time_s for j in mine]
-        ymids = [0.5 * (lead[good[j].whole, b, 1] + trail[good[j].whole, b, 1]) for j in mine]
-        # The midpoint's slope through a pass, pooled over the blade's passes (each about its mean): a short
-        # pass's height is carried to ψ = 0 by it, as its pitch is by its rate.
-        d = [tau - tau.mean() for tau in taus]
-        sxx = sum(float(x @ x) for x in d)
-        slope = sum(float(x @ (y - y.mean())) for x, y in zip(d, ymids)) / sxx if sxx > 0 else 0.0
-        for j, tau, ymid in zip(mine, taus, ymids):
-            idx = good[j].whole
-            # The height read the way the pitch was: a line's intercept, or a short pass's mean carried to t_c.
-            heights.append(float(np.polyfit(tau, ymid, 1)[1]) if idx.size >= MIN_PASS_FRAMES
-                           else float(ymid.mean() - slope * tau.mean()))
-            seps.append(float(np.median(np.hypot(*(lead[idx, b] - trail[idx, b]).T))))
-        var, dof = midpoint_variance_rad2(np.array([fits[j].pitch_rad for j in mine]), np.array(heights),
-                                          float(np.median(seps)) if seps else math.nan)
-        if dof:
-            total += var * dof
-            dof_total += dof
-    var = (total + FLOOR_PRIOR_DOF * floor) / (dof_total + FLOOR_PRIOR_DOF)
-    if dof_total < FLOOR_PRIOR_DOF:
-        warnings.append(f"{len(done)} passes: the pitch's error rests mostly on the frames' scatter (the midpoint's "
-                        f"check needs {MIN_NULL_PASSES} passes of a blade, and more to be sure)")
-    n_ref = len(done) / sum(1.0 / f.frames_used for f in done) if done else 1.0
-    fixed = iter(with_pass_error(done, var, add_line=False))
-    out = []
-    for f in fits:
-        if f is None:
-            out.append(None)
-            continue
-        g = next(fixed)
-        if not math.isfinite(f.line_stderr_rad):  # a short pass: its own parts (its rate, k) and the frames'
-            extra = floor * max(1.0 / f.frames_used - 1.0 / n_ref, 0.0)
-            g = replace(f, pitch_stderr_rad=math.sqrt(var + extra + f.pitch_stderr_rad ** 2))
-        out.append(g)
-    return out
-
-
-def _frame_variance(fits, fallback_rad2: float = 0.0) -> float:
-    """One frame's residual variance about its pass's own line, pooled over the passes of 3 frames or more.
-
-    ``fallback_rad2``: what is used when those leave fewer than 3 degrees of freedom (every pass of 2
-    frames, whose line leaves no residual): :func:`_two_frame_variance`.
-    """
-    ss = sum(f.residual_rms_rad ** 2 * f.frames_used for f in fits)
-    dof = sum(max(f.frames_used - 2, 0) for f in fits)
-    if dof >= 3 or not fallback_rad2 > 0:
-        return ss / dof if dof > 0 else fallback_rad2
-    return fallback_rad2
-
-
-def _two_frame_variance(pairs, rate_prior: float, spread: float) -> float:
-    """One frame's variance from passes of 2 frames: their difference, rate·Δτ + e₂ − e₁, about the prior rate.
-
-    E[(d − c·Δτ)²] = s²·Δτ² + 2σ² (c the rate prior, s its spread): σ² from the mean.
-    """
-    if not pairs:
-        return 0.0
-    terms = [((d - rate_prior * dt) ** 2 - (spread * dt) ** 2) / 2.0 for d, dt in pairs]
-    return max(float(np.mean(terms)), 0.0)
-
-
-#: Degrees of freedom the frames' floor weighs with against the midpoint's null channel.
-FLOOR_PRIOR_DOF = 4
 
 
 def scan_rotor(path: str | Path, settings: TrackerSettings, rotor, *, progress: Callable[[int], None] | None = None,
@@ -374,7 +292,7 @@ def passes_from_sightings(path: str | Path, sightings: RotorSightings, settings:
         idx = p.whole
         data.append((clock[idx], angle_rad_from_centroids(lead[idx, p.blade], trail[idx, p.blade])))
     fits, k, k_err = fit_passes(data, t_c, rate, t_c_stderr_s=t_c_err, k=k_held, shared_error=False,
-                                k_min_frames=MIN_SHORT_FRAMES)
+                                k_min_frames=MIN_SHORT_FRAMES, blade=blade)
     if not math.isfinite(k_err) and dist and tip and dist > tip:
         # The passes do not tell the curvature: the pinhole's, from the rig's geometry.
         k = (dist + tip) / (2.0 * (dist - tip))
@@ -382,7 +300,8 @@ def passes_from_sightings(path: str | Path, sightings: RotorSightings, settings:
         warnings.append(f"foreshortening from [rotor]'s camera distance and tip radius (k = {k:.3g}): the passes "
                         "do not tell it")
     fits, fallback = _short_fits(data, fits, good, t_c, t_c_err, rate, k, k_err)
-    fits = _shared_errors(good, fits, lead, trail, clock, warnings, fallback)
+    fits = shared_pass_errors(fits, [p.blade for p in good], [p.whole for p in good], lead, trail, clock, warnings,
+                              fallback, frames_share_errors=not monochrome_blades(rotor))
     rows = [(p, f) for p, f in zip(good, fits) if f is not None]
     return PassTable(
         video=path.name,
@@ -410,8 +329,8 @@ def _short_fits(data, fits, good, t_c, t_c_err, rate: float, k: float, k_err: fl
     """The short passes' pitches (:func:`fit_short_pass`), and the 2-frame passes' estimate of one frame's variance.
 
     The rate prior is the passes' pooled slope, its spread from every pass's pitch, one frame's
-    variance from the passes' lines (:func:`_frame_variance`); a few rounds, the short passes first
-    read with the rate held at the prior.
+    variance from the passes' lines (:func:`~servoscope.angle.pass_error.pooled_frame_variance_rad2`); a few
+    rounds, the short passes first read with the rate held at the prior.
     """
     short = [j for j, p in enumerate(good) if p.whole.size < MIN_PASS_FRAMES and math.isfinite(t_c[j])]
     if not short:
@@ -434,8 +353,8 @@ def _short_fits(data, fits, good, t_c, t_c_err, rate: float, k: float, k_err: fl
                                      frame_variance_rad2=frame_var, rate_prior_rad_s=prior, rate_prior_var=prior_var,
                                      t_c_stderr_s=float(np.nan_to_num(t_c_err[j])), k_stderr=k_se)
         done = [(j, f) for j, f in enumerate(fits) if f is not None]
-        fallback = _two_frame_variance(pairs, prior, spread)
-        frame_var = _frame_variance([f for _, f in done], fallback)
+        fallback = two_frame_variance_rad2(pairs, prior, spread)
+        frame_var = pooled_frame_variance_rad2([f for _, f in done], fallback)
         spread = pitch_rate_spread_rad_s(np.array([f.time_s for _, f in done]),
                                          np.array([f.pitch_rad for _, f in done]),
                                          np.array([good[j].blade for j, _ in done]), math.sqrt(frame_var))
