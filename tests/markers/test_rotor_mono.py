@@ -125,3 +125,40 @@ def test_mono_short_passes_fit_k_jointly(short_clip):
     assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.0075
     z = err / table.pitch_stderr_rad
     assert 0.6 < math.sqrt(np.mean(z ** 2)) < 1.3
+
+
+def test_mono_threshold_from_frames_spread_over_the_clip(tmp_path):
+    """A bright, textured background (background_seed 4) and a first frame with no sticker in it: the threshold
+    set from that frame alone (halfway to the background's bright tail) let a fifth of the picture through, 380
+    of 400 frames were "seen", the LED was not found and no blade passed twice (issue 33). Set from frames spread
+    over the clip: the frames seen are the passes', every pass read and the LED found."""
+    from servoscope.markers.passes_mono import scan_rotor_mono
+
+    offsets = (0.0, math.radians(0.2), math.radians(-0.15))
+    rig = RotorRig(blades=ROTOR_BLADE_COLOURS[:3], rev_per_s=25.0, blade_offsets_rad=offsets, azimuth0_rad=0.9,
+                   drift_fraction=0.003, cyclic_rad=0.0)
+    truth = render_rotor_clip(tmp_path / "clip", rig, collective, duration_s=0.2, fps=2000, exposure_s=EXPOSURE_S,
+                              width=320, height=240, led_off_s=0.1, noise_seed=4, background_seed=4, monochrome=True,
+                              bit_depth=12)
+    cih = next((tmp_path / "clip").glob("*.cih"))
+    assert truth["passes"][0]["first_frame"] > 0  # the first frame shows no blade
+    sightings = scan_rotor_mono(cih)
+    assert sightings.led_xy_px is not None
+    assert np.hypot(*(np.asarray(sightings.led_xy_px) - (32.0, 40.0))) < 0.5  # the renderer's LED (0.1 w, h/6)
+    in_pass = np.zeros(len(truth["time_s"]), bool)
+    for p in truth["passes"]:
+        in_pass[max(0, p["first_frame"] - 1):p["last_frame"] + 2] = True
+    seen = sightings.seen[:, 0]
+    assert not np.any(seen & ~in_pass), np.flatnonzero(seen & ~in_pass)
+    table = track_passes(cih, TrackerSettings(lead="bright", trail="bright", led="bright", exposure_s=EXPOSURE_S),
+                         rotor=[("bright", "bright")] * 3)
+    listed = [p for p in truth["passes"] if p["first_frame"] > 0 and p["last_frame"] < len(truth["time_s"]) - 1]
+    assert len(table) == len(listed) >= 14
+    first = min(listed, key=lambda p: p["first_frame"])["blade"]
+    for p in listed:
+        j = int(np.argmin(np.abs(table.time_s - p["time_s"])))
+        assert abs(table.time_s[j] - p["time_s"]) < 1e-4
+        assert table.blade[j] == (p["blade"] - first) % 3
+    err = table.pitch_rad - (collective(table.time_s) + np.array(offsets)[(table.blade + first) % 3])
+    assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.01
+    assert abs(table.t0_s - truth["t0_s"]) < 5 * table.t0_uncertainty_s + 2e-6

@@ -7,7 +7,8 @@ camera's native samples, :func:`~servoscope.video.native.iter_native_frames`):
 
 1. **a cheap test first**: every 4th row unpacked, every 4th sample of it compared with the
    threshold (halfway between the picture's typical level and its brightest stickers', as
-   :class:`~servoscope.markers.colour.BrightnessModel` sets it); the LED's fixed disk left
+   :class:`~servoscope.markers.colour.BrightnessModel` sets it, from :data:`THRESHOLD_FRAMES` frames
+   spread over the clip: :func:`coarse_threshold`); the LED's fixed disk left
    out (the LED is the one bright blob of one of the first :data:`~servoscope.markers.passes.LED_TRIES`
    frames; blades are looked for once it is found or given up). A frame with fewer than :data:`~servoscope.markers.passes.MIN_COARSE` samples
    above it is empty;
@@ -29,6 +30,7 @@ numbers the passes in time order, pass k blade k mod N (blade 0 the first seen; 
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 from typing import Callable
@@ -36,13 +38,14 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..video.native import iter_native_frames, unpack_rows
+from ..video.frame_source import is_frame_source
+from ..video.native import NativeFrame, NativeSource, iter_native_frames, unpack_rows
 from . import kernels as K
 from .kernel_mono import MONO_NP, MP, track_frame_mono
 from .led_level import LED_PEAK_FRAMES
 from .passes import LED_TRIES, MIN_COARSE, RotorSightings
 
-__all__ = ["scan_rotor_mono"]
+__all__ = ["coarse_threshold", "scan_rotor_mono"]
 
 #: Support beyond a sticker's extent (px), and the background ring's width (px): as the colour scan's.
 SUPPORT_MARGIN_PX = 1.0
@@ -52,6 +55,14 @@ MIN_CONTRAST_DN8 = 5.8
 #: A blob within this many coarse samples (4 px each) of one in the previous frame is fixed, not a sticker:
 #: a tip crossing a 320-px picture in ~10 frames moves ~8 coarse samples a frame (~3 at 10,000 frames/s).
 STATIC_COARSE_PX = 0.75
+#: Frames, spread evenly over the clip, whose coarse samples set the threshold. The first frame alone may show
+#: no sticker: then its brightest samples are the background's bright tail, and the threshold set halfway to
+#: them let a fifth of a bright background through (issue 33: 778 of 800 frames "seen", the LED not found).
+#: A sticker is in view in 12-18 % of the twin's clips' frames (2-3 blades, 20-30 rev/s): ~8-12 of the 64 show one.
+THRESHOLD_FRAMES = 64
+#: A video has no cheap random access: its threshold frames are every 8th of its first 512 (0.26 s at 2,000
+#: frames/s, four revolutions or more of each blade at 15 rev/s and up), decoded twice, not the whole clip.
+VIDEO_THRESHOLD_SPAN = 512
 
 
 def _coarse(frame) -> np.ndarray:
@@ -62,6 +73,61 @@ def _coarse(frame) -> np.ndarray:
     elif frame.shift:
         rows = rows >> frame.shift
     return rows[:, ::4].astype(np.float32)
+
+
+def _spread_frames(path: Path):
+    """Up to :data:`THRESHOLD_FRAMES` frames spread evenly over the clip (a video: over its first
+    :data:`VIDEO_THRESHOLD_SPAN` frames)."""
+    src = NativeSource(path) if is_frame_source(path) else None
+    if src is None or not src.header.monochrome:
+        if src is not None:
+            src.close()
+        step = max(VIDEO_THRESHOLD_SPAN // THRESHOLD_FRAMES, 1)
+        frames = iter_native_frames(path)
+        try:
+            yield from itertools.islice(frames, 0, VIDEO_THRESHOLD_SPAN, step)
+        finally:
+            frames.close()  # its decoder now, not when collected
+        return
+    try:
+        h = src.header
+        n = int(h.frame_count)
+        for i in np.unique(np.linspace(0, n - 1, min(n, THRESHOLD_FRAMES)).round().astype(int)):
+            samples, packed = src.view(int(i))
+            yield NativeFrame(int(i), float(h.times_s[i]), samples, packed, h.width, h.bit_depth, src.black,
+                              src.white, src.shift)
+    finally:
+        src.close()
+
+
+def coarse_threshold(path: str | Path) -> float:
+    """The cheap test's brightness threshold (samples' own levels) from frames spread over the clip.
+
+    Halfway between the picture's typical level (the median of the frames' medians) and its brightest
+    stickers' (the most of the frames' 99.9th percentiles of the coarse samples): the first frame alone may
+    show no sticker. Where the brightest is not clearly above the typical level (by a quarter of the way to
+    the white level: the frames show no sticker, only the background or a small LED), halfway to white.
+
+    Parameters
+    ----------
+    path : path-like
+        As :func:`scan_rotor_mono`'s.
+
+    Returns
+    -------
+    float
+    """
+    typical, extreme, white = [], -math.inf, math.nan
+    for frame in _spread_frames(Path(path)):
+        g = _coarse(frame)
+        typical.append(float(np.median(g)))
+        extreme = max(extreme, float(np.percentile(g, 99.9)))
+        white = float(frame.white)
+    if not typical:
+        return math.inf
+    level = float(np.median(typical))
+    top = extreme if extreme - level > 0.25 * (white - level) else white
+    return 0.5 * (level + top)
 
 
 def _crop(frame, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
@@ -122,7 +188,8 @@ def scan_rotor_mono(path: str | Path, *, led: bool = True, led_near: tuple[float
     time_s, seen_rows, lead_rows, trail_rows, lsig_rows, tsig_rows = [], [], [], [], [], []
     out = RotorSightings(np.zeros(0), np.zeros((0, 1), bool), np.zeros((0, 1, 2)), np.zeros((0, 1, 2)),
                          np.zeros((0, 1)), np.zeros((0, 1)))
-    threshold = None
+    threshold = coarse_threshold(path)
+    dn8 = None
     level = None
     led_disk = None
     previous = None  # the last frame's bright blobs' centroids (coarse samples)
@@ -133,14 +200,7 @@ def scan_rotor_mono(path: str | Path, *, led: bool = True, led_near: tuple[float
         h, w = frame.shape
         out.width, out.height = w, h
         g = _coarse(frame)
-        if threshold is None:
-            typical = float(np.median(g))
-            extreme = float(np.percentile(g, 99.9))
-            white = float(frame.white)
-            # The brightest coarse samples of the first frame may be the LED alone, or nothing: halfway to
-            # the white level then.
-            top = extreme if extreme - typical > 0.25 * (white - typical) else white
-            threshold = 0.5 * (typical + top)
+        if dn8 is None:
             dn8 = (frame.white - frame.black) / 255.0
         mask = (g >= threshold).astype(np.uint8)
         if led_disk is not None:
