@@ -18,7 +18,9 @@ Per frame (:func:`scan_rotor_video`, on the decoder's YUV planes):
    pixel between the sticker's colour and its own background: the sub-pixel centroid
    ``servoscope track`` measures. A sticker is *whole* when its support and background
    ring lie inside the picture; a sticker cut by the picture's edge is seen (the blade is
-   there) but not measured.
+   there) but not measured. The vertical coordinate is then taken again from luma alone
+   (:func:`~servoscope.markers.pass_centroid.luma_row_centroid`): the kernel's leans on 4:2:0
+   chroma and is biased with the sticker's sub-pixel row, a bias frozen through a pass.
 
 Each sticker's colour (its YUV, hue cone, noise) is learned the first time it is whole,
 as the static engines learn it from their first frame; before that the given colour seeds
@@ -45,9 +47,10 @@ from ..video.reader import iter_yuv_frames
 from . import kernels as K
 from .colour import BRIGHTNESS, ColourModel, parse_colour, ycbcr_bt601
 from .led_level import LED_PEAK_FRAMES, disk_level
+from .pass_centroid import luma_row_centroid
 from .yuv_engine import learn_colour_model
 
-__all__ = ["MIN_COARSE", "PassFrames", "RotorSightings", "blade_colours", "scan_rotor_video", "segment_passes"]
+__all__ = ["LUMA_ROWS", "MIN_COARSE", "PassFrames", "RotorSightings", "blade_colours", "scan_rotor_video", "segment_passes"]
 
 #: Coarse-grid samples (one per 4×4 luma pixels) of a colour for a frame to be looked at closely.
 MIN_COARSE = 2
@@ -72,6 +75,11 @@ SUPPORT_FROM_MOMENTS = True
 #: H.264 0.040 / 0.028 / 0.025° (3 blades 0.045 / 0.030 / 0.018°), a second H.264 clip at 25 rev/s
 #: 0.024 / 0.018 / 0.015°.
 W_Y = 8.0
+#: Each whole sticker's vertical coordinate from full-resolution luma (:mod:`.pass_centroid`), not the kernel's:
+#: the kernel's has a ±0.03 px saw-tooth with the row's sub-pixel phase (4:2:0 chroma's tail cut by the 1-px
+#: support), which read as a pitch scale of 0.983-1.017; from luma ≤ 0.003 px (4 mm stickers, per-pass pitch
+#: against truth: slopes 0.998-1.002 raw, 1.002-1.006 H.264 at 40 Mbit/s; docs/rotor.md).
+LUMA_ROWS = True
 #: Empty frames the LED is looked for in before the video is taken to have none.
 LED_TRIES = 20
 #: A pass's seen frames may miss this many frames in a row (a sticker hidden by noise) and stay one pass.
@@ -221,7 +229,8 @@ def _class_blob(st: _Sticker, U, V, box, shape):
     return labels == lab, i0, j0
 
 
-def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray) -> tuple[bool, float, float, float]:
+def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray,
+             luma_rows: bool = True) -> tuple[bool, float, float, float]:
     """The sticker's kernel measurement over a support following its blob's box: (whole, x, y, σ)."""
     h, w = Y.shape
     jj, ii = np.nonzero(blob)
@@ -267,7 +276,15 @@ def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray)
     out_row[:] = r
     if not (r[K.Q.M00] > 0 and r[K.Q.RING_N] >= 8 and r[K.Q.AT_BORDER] == 0):
         return False, math.nan, math.nan, math.nan
-    return True, float(r[K.Q.X]), float(r[K.Q.Y]), math.sqrt(0.5 * (r[K.Q.VAR_X] + r[K.Q.VAR_Y]))
+    y, var_y = float(r[K.Q.Y]), float(r[K.Q.VAR_Y])
+    if luma_rows:
+        # The vertical coordinate again from luma alone (pass_centroid: the kernel's leans on 4:2:0 chroma,
+        # whose cut tail biases it with the row's sub-pixel phase, frozen through a pass).
+        yl, sl = luma_row_centroid(Y, float(r[K.Q.X]), y, p[K.P.HALF_U], p[K.P.HALF_V], SUPPORT_MARGIN_PX,
+                                   RING_PX, p[K.P.YM], p[K.P.VAR_Y])
+        if math.isfinite(yl):
+            y, var_y = yl, sl * sl
+    return True, float(r[K.Q.X]), y, math.sqrt(0.5 * (r[K.Q.VAR_X] + var_y))
 
 
 def _hex(rgb) -> str:
@@ -294,7 +311,7 @@ def _find_led(rgb: np.ndarray, spec, near) -> tuple[tuple[float, float], float] 
 
 def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led: str | None = None,
                      led_near: tuple[float, float] | None = None,
-                     progress: Callable[[int], None] | None = None) -> RotorSightings:
+                     progress: Callable[[int], None] | None = None, luma_rows: bool | None = None) -> RotorSightings:
     """Every frame of a rotor's video: each blade's stickers, their centroids where whole, the fixed LED's level.
 
     Parameters
@@ -309,6 +326,9 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
         Pin the LED by position (px).
     progress : callable, optional
         Called with the number of frames done, now and then.
+    luma_rows : bool, optional
+        Each sticker's vertical coordinate from luma (:mod:`.pass_centroid`); False: the fused kernel's
+        (biased with the row's sub-pixel phase, for comparison); None: :data:`LUMA_ROWS`.
 
     Returns
     -------
@@ -320,6 +340,7 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
     LED together, in the order a frame needs them.
     """
     path = Path(path)
+    luma_rows = LUMA_ROWS if luma_rows is None else bool(luma_rows)
     pairs = blade_colours(blades)
     nb = len(pairs)
     stickers = [_Sticker(f"blade {b} {which}", parse_colour(spec)) for b, pair in enumerate(pairs)
@@ -401,7 +422,7 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
                 if found is None:
                     continue
                 blob, i0, j0 = found
-            whole, x, y, sig = _measure(st, Y, U, V, blob, i0, j0, row)
+            whole, x, y, sig = _measure(st, Y, U, V, blob, i0, j0, row, luma_rows)
             if whole:
                 if which == 0:
                     lead_xy[b], lsig[b] = (x, y), sig
