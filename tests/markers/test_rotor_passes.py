@@ -58,6 +58,15 @@ def test_pitch_per_pass_against_truth(clip):
     assert abs(math.degrees(diff) - 0.2) < 0.03
 
 
+
+def test_a_sticker_whose_luma_is_near_the_blades_is_named(clip):
+    # Blade 1's lead, the twin's blue #1d4fd8, is 17 DN of luma from the blade: its height stays the colour
+    # kernel's (biased with its sub-pixel row), and the table says so, naming it; the other three are read on luma.
+    rig, path, truth, table = clip
+    named = [w for w in table.warnings if "height read by the colour kernel" in w]
+    assert len(named) == 1 and named[0].startswith("blade 1 lead #1d4fd8"), table.warnings
+
+
 def test_rotor_speed_and_t0(clip):
     rig, path, truth, table = clip
     t = table.time_s

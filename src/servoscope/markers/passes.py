@@ -47,7 +47,7 @@ from ..video.reader import iter_yuv_frames
 from . import kernels as K
 from .colour import BRIGHTNESS, ColourModel, parse_colour, ycbcr_bt601
 from .led_level import LED_PEAK_FRAMES, disk_level
-from .pass_centroid import luma_row_centroid
+from .pass_centroid import MIN_LUMA_CONTRAST_DN, luma_row_centroid
 from .yuv_engine import learn_colour_model
 
 __all__ = ["LUMA_ROWS", "MIN_COARSE", "PassFrames", "RotorSightings", "blade_colours", "scan_rotor_video", "segment_passes"]
@@ -80,6 +80,8 @@ W_Y = 8.0
 #: support), which read as a pitch scale of 0.983-1.017; from luma ≤ 0.003 px (4 mm stickers, per-pass pitch
 #: against truth: slopes 0.998-1.002 raw, 1.002-1.006 H.264 at 40 Mbit/s; docs/rotor.md).
 LUMA_ROWS = True
+#: Whole frames of a sticker before its heights' source is judged (a warning when luma read under half of them).
+KERNEL_ROWS_MIN_FRAMES = 5
 #: Empty frames the LED is looked for in before the video is taken to have none.
 LED_TRIES = 20
 #: A pass's seen frames may miss this many frames in a row (a sticker hidden by noise) and stay one pass.
@@ -195,6 +197,9 @@ class RotorSightings:
     width, height : int
     colours_seen : list of str
         What the cheap test saw of each colour (for the error when no pass is found).
+    kernel_rows : list of str
+        The stickers whose height was mostly the colour kernel's, not luma's (:data:`LUMA_ROWS`), each
+        with why it matters and what avoids it: a warning.
     """
 
     time_s: np.ndarray
@@ -210,6 +215,7 @@ class RotorSightings:
     width: int = 0
     height: int = 0
     colours_seen: list[str] = field(default_factory=list)
+    kernel_rows: list[str] = field(default_factory=list)
 
 
 def _class_blob(st: _Sticker, U, V, box, shape):
@@ -230,8 +236,8 @@ def _class_blob(st: _Sticker, U, V, box, shape):
 
 
 def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray,
-             luma_rows: bool = True) -> tuple[bool, float, float, float]:
-    """The sticker's kernel measurement over a support following its blob's box: (whole, x, y, σ)."""
+             luma_rows: bool = True) -> tuple[bool, float, float, float, bool]:
+    """The sticker's kernel measurement over a support following its blob's box: (whole, x, y, σ, y from luma)."""
     h, w = Y.shape
     jj, ii = np.nonzero(blob)
     # Chroma sample (i, j) covers luma columns 2i, 2i+1 (rows likewise).
@@ -243,7 +249,7 @@ def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray,
     reach_y = hv + SUPPORT_MARGIN_PX + 1.0 + RING_PX
     whole = cx - reach_x >= 0 and cy - reach_y >= 0 and cx + reach_x <= w - 1 and cy + reach_y <= h - 1
     if not whole:
-        return False, math.nan, math.nan, math.nan
+        return False, math.nan, math.nan, math.nan, False
     p = st.prm.copy()
     p[K.P.HALF_U], p[K.P.HALF_V] = hu, hv
     p[K.P.RADIUS] = math.hypot(hu, hv) + SUPPORT_MARGIN_PX
@@ -269,22 +275,23 @@ def _measure(st: _Sticker, Y, U, V, blob, i0: int, j0: int, out_row: np.ndarray,
         if not (cx - hu - SUPPORT_MARGIN_PX - 1.0 - RING_PX >= 0 and cy - hv - SUPPORT_MARGIN_PX - 1.0 - RING_PX >= 0
                 and cx + hu + SUPPORT_MARGIN_PX + 1.0 + RING_PX <= w - 1
                 and cy + hv + SUPPORT_MARGIN_PX + 1.0 + RING_PX <= h - 1):
-            return False, math.nan, math.nan, math.nan
+            return False, math.nan, math.nan, math.nan, False
         params[0] = p
         K.track_frame_numba(Y, U, V, 0, 1, params, np.zeros(K.LED_NP), out, np.zeros(K.LED_NQ))
         r = out[0]
     out_row[:] = r
     if not (r[K.Q.M00] > 0 and r[K.Q.RING_N] >= 8 and r[K.Q.AT_BORDER] == 0):
-        return False, math.nan, math.nan, math.nan
+        return False, math.nan, math.nan, math.nan, False
     y, var_y = float(r[K.Q.Y]), float(r[K.Q.VAR_Y])
+    from_luma = False
     if luma_rows:
         # The vertical coordinate again from luma alone (pass_centroid: the kernel's leans on 4:2:0 chroma,
         # whose cut tail biases it with the row's sub-pixel phase, frozen through a pass).
         yl, sl = luma_row_centroid(Y, float(r[K.Q.X]), y, p[K.P.HALF_U], p[K.P.HALF_V], SUPPORT_MARGIN_PX,
                                    RING_PX, p[K.P.YM], p[K.P.VAR_Y])
         if math.isfinite(yl):
-            y, var_y = yl, sl * sl
-    return True, float(r[K.Q.X]), y, math.sqrt(0.5 * (r[K.Q.VAR_X] + var_y))
+            y, var_y, from_luma = yl, sl * sl, True
+    return True, float(r[K.Q.X]), y, math.sqrt(0.5 * (r[K.Q.VAR_X] + var_y)), from_luma
 
 
 def _hex(rgb) -> str:
@@ -359,6 +366,8 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
                          np.zeros((0, nb)), np.zeros((0, nb)))
     led_disk = None
     coarse_max = np.zeros(len(stickers), dtype=np.int64)
+    n_whole = [0] * len(stickers)  # whole measurements of each sticker, and how many took their height from luma
+    n_luma = [0] * len(stickers)
     coarse_where: list[tuple[int, float, float] | None] = [None] * len(stickers)
     row = np.zeros(K.NQ)
     sat_floor = np.float32(min(st.prm[K.P.SAT_MIN] for st in stickers))
@@ -422,8 +431,10 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
                 if found is None:
                     continue
                 blob, i0, j0 = found
-            whole, x, y, sig = _measure(st, Y, U, V, blob, i0, j0, row, luma_rows)
+            whole, x, y, sig, from_luma = _measure(st, Y, U, V, blob, i0, j0, row, luma_rows)
             if whole:
+                n_whole[s] += 1
+                n_luma[s] += from_luma
                 if which == 0:
                     lead_xy[b], lsig[b] = (x, y), sig
                 else:
@@ -469,6 +480,13 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
                                          f"at most {coarse_max[s]} coarse samples (frame {coarse_where[s][0]}, "
                                          f"around x={coarse_where[s][1]:.0f}, y={coarse_where[s][2]:.0f} px)"))
         for s, st in enumerate(stickers)]
+    if luma_rows:
+        out.kernel_rows = [
+            f"{st.name} {_hex(st.rgb)}: its height read by the colour kernel in {n_whole[s] - n_luma[s]} of "
+            f"{n_whole[s]} frames (its luma under {MIN_LUMA_CONTRAST_DN:.0f} DN from the blade's, or the tip's edge "
+            "too near): biased with its sub-pixel row by up to 0.03 px, a scale on the pitch of up to ±1.7 %; a "
+            f"colour whose luma differs from the blade's by {MIN_LUMA_CONTRAST_DN:.0f} DN or more avoids it"
+            for s, st in enumerate(stickers) if n_whole[s] >= KERNEL_ROWS_MIN_FRAMES and 2 * n_luma[s] < n_whole[s]]
     return out
 
 

@@ -211,7 +211,7 @@ def passes_from_sightings(path: str | Path, sightings: RotorSightings, settings:
     """
     path = Path(path)
     settings = settings or TrackerSettings()
-    warnings = list(warnings or [])
+    warnings = list(warnings or []) + list(sightings.kernel_rows)
     lead = sightings.lead_xy_px.copy()
     trail = sightings.trail_xy_px.copy()
     nb = lead.shape[1]
