@@ -167,6 +167,11 @@ _LOSSY = ("h264", "hevc", "mpeg2video", "mpeg4", "vp9", "av1")
 #: amplitude errs by 0.005-0.034° (RMS 0.02°) whatever its size, so that a small dwell's gain errs most
 #: (+6 % at 0.35°). Two terms, then: a scale common to every dwell (the gain's interval, after the fit) and an
 #: amplitude error of each dwell's own (its gain's error, which the fit carries into ωn and ζ).
+#: Since session 10 a sticker's height is read on luma (markers/pass_centroid.py, ≤ 0.003 px; slopes 0.998-1.006
+#: on 4 mm stickers), but a sticker within 20 DN of the blade's luma (the twin's blue) or nearly as tall as the tip
+#: is thick keeps the kernel's: the slopes' RMS about 1 is still 0.61 % over the ten clips measured (3 mm with a
+#: blue lead 1.0067 raw, 1.0116 H.264; 6 mm 0.990), and the term stays until the narrower one is checked on the
+#: 3 mm / 5,000 frames/s and 3-blade campaigns.
 ROTOR_SCALE_STDERR_COLOUR = 0.013
 #: Each dwell's amplitude error on colour footage, rad (1σ; 0.02°).
 ROTOR_AMPLITUDE_STDERR_COLOUR_RAD = math.radians(0.02)
@@ -242,8 +247,9 @@ def rotor_systematics(campaign: Campaign) -> RotorSystematics | None:
     what = f"{', '.join(lossy)}-compressed colour footage" if lossy else "colour footage"
     return RotorSystematics(ROTOR_SCALE_STDERR_COLOUR, ROTOR_AMPLITUDE_STDERR_COLOUR_RAD,
                             f"a turning rotor's passes on {what}: each sticker's sub-pixel bias, frozen through a "
-                            "pass, reads as a scale of the pitch (slope 0.983-1.017 on the twin) and errs a "
-                            "dwell's amplitude by ~0.02° (docs/rotor.md)", lossy)
+                            "pass, reads as a scale of the pitch (slope 0.983-1.017 on the twin, 0.998-1.006 where its height "
+                            "is read on luma: kept for the stickers whose is not) and errs a dwell's amplitude by "
+                            "~0.02° (docs/rotor.md)", lossy)
 
 
 def rotor_scale_error(campaign: Campaign) -> tuple[float, str] | None:
