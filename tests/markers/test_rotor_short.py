@@ -28,11 +28,11 @@ def clip(tmp_path_factory):
     truth = render_rotor_clip(path, rig, collective, duration_s=0.4, fps=2000, exposure_s=EXPOSURE_S, width=320,
                               height=240, led_off_s=0.1, noise_seed=3, background_seed=3)
     table = track_passes(path, TrackerSettings(exposure_s=EXPOSURE_S), rotor=ROTOR_BLADE_COLOURS[:2])
-    return rig, truth, table
+    return rig, truth, table, path
 
 
 def test_every_short_pass_read_against_truth(clip):
-    rig, truth, table = clip
+    rig, truth, table, _ = clip
     listed = [p for p in truth["passes"] if p["first_frame"] > 0 and p["last_frame"] < len(truth["time_s"]) - 1]
     # Before: none of them had the 4 whole frames a pass's own line needs (no pass at all, an error).
     assert len(table) == len(listed) >= 20
@@ -51,6 +51,24 @@ def test_every_short_pass_read_against_truth(clip):
     assert abs(table.rev_per_s / span - 1) < 1e-4
     back = PassTable.from_summary(table.summary())
     assert list(back.n_whole) == list(table.n_whole)
+
+
+def test_the_cameras_distance_and_the_tips_radius_give_k(clip):
+    # Passes of 2-3 frames of colour footage tell the foreshortening k poorly (its curvature over ±5° of ψ); with
+    # [rotor]'s camera distance and tip radius, the pinhole's k (from a tape's ±1 cm and ±3 mm) is weighed in.
+    from servoscope.campaign.sections import RotorSpec
+    from servoscope.pipeline.rotor import pinhole_k
+
+    rig, truth, alone, path = clip
+    spec = RotorSpec(blades=tuple(ROTOR_BLADE_COLOURS[:2]), rev_per_s=None, camera_distance_m=rig.camera_distance_m,
+                     tip_radius_m=rig.tip_radius_m)
+    table = track_passes(path, TrackerSettings(exposure_s=EXPOSURE_S), rotor=spec)
+    k_geo, k_geo_err = pinhole_k(rig.camera_distance_m, rig.tip_radius_m)
+    assert alone.foreshortening_k_stderr > 3 * k_geo_err  # what the passes alone tell
+    assert table.foreshortening_k_stderr <= k_geo_err and abs(table.foreshortening_k - k_geo) < 2 * k_geo_err
+    err = table.pitch_rad - (collective(table.time_s) + np.array(OFFSETS)[table.blade])
+    assert math.degrees(math.sqrt(np.mean(err ** 2))) < 0.03
+    assert 0.5 < math.sqrt(np.mean((err / table.pitch_stderr_rad) ** 2)) < 1.3
 
 
 def test_pooled_crossing_times_recover_a_common_path():

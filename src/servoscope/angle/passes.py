@@ -331,7 +331,8 @@ def fit_pass(time_s: NDArray[np.float64], angle_rad: NDArray[np.float64], t_c_s:
 def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_c_s: NDArray[np.float64],
                rev_per_s: float, *, t_c_stderr_s: NDArray[np.float64] | None = None,
                k: float | None = None, shared_error: bool = True, k_min_frames: int = MIN_PASS_FRAMES,
-               blade: NDArray[np.int64] | None = None) -> tuple[list[PassFit], float, float]:
+               blade: NDArray[np.int64] | None = None,
+               k_stderr: float = math.nan) -> tuple[list[PassFit], float, float]:
     """Every pass's pitch at ψ = 0, the foreshortening's ``k`` fitted common to them.
 
     Parameters
@@ -344,6 +345,8 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
     t_c_stderr_s : ndarray, optional
     k : float, optional
         Hold ``k`` (e.g. from the camera's distance and the tip's radius); None: fitted.
+    k_stderr : float
+        A held ``k``'s standard error, carried into each pass's pitch error; NaN: none stated.
     shared_error : bool
         Add one frame's residual variance (pooled over the passes) to each pass's pitch
         variance: the frames of a pass share their centroid errors (True, the default; False
@@ -360,14 +363,13 @@ def fit_passes(passes: list[tuple[NDArray[np.float64], NDArray[np.float64]]], t_
     Returns
     -------
     (fits, k, k_stderr) : (list of PassFit, float, float)
-        ``k_stderr`` NaN when held or not determined (then ``k`` is ½, the orthographic limit).
+        ``k_stderr`` NaN when not determined (then ``k`` is ½, the orthographic limit) or held without one.
     """
     t_c = np.asarray(t_c_s, dtype=np.float64)
     err = np.zeros(t_c.size) if t_c_stderr_s is None else np.nan_to_num(np.asarray(t_c_stderr_s, dtype=float))
     usable = [i for i, (t, _) in enumerate(passes) if np.size(t) >= MIN_PASS_FRAMES and np.isfinite(t_c[i])]
     telling = [i for i, (t, _) in enumerate(passes)
                if np.size(t) >= min(k_min_frames, MIN_PASS_FRAMES) and np.isfinite(t_c[i])]
-    k_stderr = math.nan
     if k is None:
         k, k_stderr = fit_k_mixed([passes[i] for i in telling], t_c[telling], rev_per_s,
                                   None if blade is None else np.asarray(blade)[telling])
