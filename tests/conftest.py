@@ -63,8 +63,29 @@ def pytest_configure(config):
     if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
         return
     cores = sorted(os.sched_getaffinity(0))
+    _ALL_CORES.extend(cores)
     share = cores[int(worker[2:]) % count::count] if len(cores) >= count else [cores[int(worker[2:]) % len(cores)]]
     os.sched_setaffinity(0, share)
+
+
+#: The cores this test worker could run on before it was pinned (empty where it was not).
+_ALL_CORES: list[int] = []
+
+
+@pytest.fixture
+def all_cores():
+    """The test runs on every core the worker had before it was pinned, as a user's process does: a real-time
+    test (the rig's 50 Hz stream, its driver and the fake servo controller each a thread) must not share one
+    core with whatever else the worker's process runs (session 10: a sample skipped, more than a period late)."""
+    if not _ALL_CORES or not hasattr(os, "sched_setaffinity"):
+        yield
+        return
+    pinned = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, _ALL_CORES)
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, pinned)
 
 
 # The files that take longest, longest first (pytest --durations on a fresh clone on the 2-core machine,

@@ -207,7 +207,7 @@ def _drive_one_sine_dwell(workdir: Path) -> tuple[np.ndarray, np.ndarray, float]
     return arrival_ms, sent_ms, result.max_late_ms
 
 
-def test_sine_dwell_targets_timing_and_led(tmp_path, capsys):
+def test_sine_dwell_targets_timing_and_led(tmp_path, capsys, all_cores):
     """A 2 s, 2 Hz dwell: every target, its arrival time within 2 ms of schedule, the LED switch at t0.
 
     The fake's arrival stamps include the pty's delivery, which the kernel does
