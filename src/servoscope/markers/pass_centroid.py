@@ -76,8 +76,8 @@ def luma_row_centroid(Y: np.ndarray, cx: float, cy: float, half_u_px: float, hal
     Returns
     -------
     (float, float)
-        ``(y_px, sigma_px)``; NaN, NaN where the window leaves the picture, the ring is too small to
-        fit its plane, or the sticker's luma contrast is under :data:`MIN_LUMA_CONTRAST_DN`.
+        ``(y_px, sigma_px)``; NaN, NaN where the window leaves the picture, the ring's sides leave too few
+        pixels for the blade's level, a section's edge lies just above or below the support, or the sticker's luma contrast is under :data:`MIN_LUMA_CONTRAST_DN`.
     """
     y, sigma = _luma_rows_nb(Y, float(cx), float(cy), float(half_u_px), float(half_v_px), float(margin_px),
                              float(ring_px), float(sticker_luma_dn), float(luma_var_dn2), LUMA_MARGIN_PX, EDGE_SHARE,

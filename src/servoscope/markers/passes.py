@@ -422,7 +422,7 @@ def scan_rotor_video(path: str | Path, blades: Sequence[tuple[str, str]], *, led
                 continue
             blob, i0, j0 = found
             if not st.learned:
-                whole = _measure(st, Y, U, V, blob, i0, j0, row)[0]
+                whole = _measure(st, Y, U, V, blob, i0, j0, row, luma_rows=False)[0]  # only whether whole
                 if not whole:
                     continue
                 st.learn(Y, U, V, blob, i0, j0)

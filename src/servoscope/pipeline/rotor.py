@@ -299,14 +299,13 @@ def passes_from_sightings(path: str | Path, sightings: RotorSightings, settings:
     elif given is not None and abs(rate - given) > 0.01 * given:
         warnings.append(f"rotor speed measured {rate:.5g} rev/s, [rotor] rev_per_s says {given:g}: the measured one "
                         "is used")
-    k_held = None
     dist = getattr(rotor, "camera_distance_m", None) if rotor is not None else None
     tip = getattr(rotor, "tip_radius_m", None) if rotor is not None else None
     data = []
     for p in good:
         idx = p.whole
         data.append((clock[idx], angle_rad_from_centroids(lead[idx, p.blade], trail[idx, p.blade])))
-    fits, k, k_err = fit_passes(data, t_c, rate, t_c_stderr_s=t_c_err, k=k_held, shared_error=False,
+    fits, k, k_err = fit_passes(data, t_c, rate, t_c_stderr_s=t_c_err, shared_error=False,
                                 k_min_frames=MIN_SHORT_FRAMES, blade=blade)
     if dist and tip and dist > tip:
         # k is the camera's geometry, the same in every video: the pinhole's from [rotor]'s distance and tip radius
