@@ -214,6 +214,36 @@ def test_noise_is_seeded_per_frame_with_the_requested_sigma():
     assert np.array_equal(a.render(0.01, 1.0, 0), f0)
 
 
+@pytest.mark.parametrize("bits", [8, 12, 16])
+def test_monochrome_frame_is_luma_at_the_depth_with_its_noise(bits):
+    """The twin's monochrome samples against OpenCV's BT.601 luma (an independent oracle): scaled to the depth
+    and the light level, the noise σ scaled with them, seeded per frame, clipped to the depth's range."""
+    import cv2
+
+    from servoscope.simulate.render_parts import gray_frame
+
+    scene = Scene.for_size(360, 288)
+    clean = FrameRenderer(scene, noise_sigma_dn=0.0).composite(0.01, 1.0)
+    top = 2**bits - 1
+    frame = gray_frame(clean, bits, 0.7, 1.5, (4, 0x6A7, 0))
+    assert frame.dtype == (np.uint8 if bits == 8 else np.uint16) and frame.shape == clean.shape[:2]
+    luma = cv2.cvtColor(clean, cv2.COLOR_RGB2GRAY).astype(float) * (0.7 * top / 255)
+    noise = (frame - luma) / (top / 255)  # in 8-bit DN
+    rounding = 1 / 12 / (top / 255) ** 2
+    assert noise.std() == pytest.approx(np.sqrt(1.5**2 + rounding), rel=0.03)
+    assert abs(noise.mean()) < 0.02
+    assert np.array_equal(frame, gray_frame(clean, bits, 0.7, 1.5, (4, 0x6A7, 0)))
+    other = gray_frame(clean, bits, 0.7, 1.5, (4, 0x6A7, 1))
+    assert abs(np.corrcoef(noise.ravel(), (other - luma).ravel())[0, 1]) < 0.01
+    # An over-exposed picture clips at the depth's top, a black one at 0 (noise both ways).
+    assert gray_frame(np.full((8, 8, 3), 300.0, np.float32), bits, 1.0, 1.5, (1,)).max() == top
+    dark = gray_frame(np.zeros((64, 64, 3), np.float32), bits, 1.0, 1.5, (1,))
+    from scipy.stats import norm
+
+    # A sample reads 0 when its noise is below half a step: Φ(0.5 / σ at the depth).
+    assert (dark == 0).mean() == pytest.approx(norm.cdf(0.5 / (1.5 * top / 255)), abs=0.03)
+
+
 def test_renderer_rejects_mismatched_camera():
     with pytest.raises(ServoscopeError):
         FrameRenderer(Scene(), CameraModel.ideal(640, 480))

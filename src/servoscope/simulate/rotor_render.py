@@ -24,11 +24,11 @@ import cv2
 import numpy as np
 
 from ..errors import ServoscopeError
-from ..markers.colour import luma_bt601
 from ..video.sequence_writer import MrawWriter
 from ..video.writer import VideoWriter
 from .coverage import accumulated, composite
 from .render import FrameRenderer
+from .render_parts import gray_frame
 from .rotor import RotorRig, rotor_passes
 from .scene import Scene, colour_rgb, led_exposure_fraction
 
@@ -239,12 +239,9 @@ class RotorRenderer:
 
     def gray(self, clean: np.ndarray, frame_index: int, bit_depth: int, light_level: float = 1.0) -> np.ndarray:
         """A monochrome camera's frame of ``clean``: BT.601 luma at ``bit_depth`` bits, its noise, as the static
-        twin's (the noise ``noise_sigma_dn`` of 8-bit DN scaled to the depth, seeded per frame)."""
-        top = 2 ** bit_depth - 1
-        y = luma_bt601(clean).astype(np.float64) * (light_level * top / 255.0)
-        rng = np.random.default_rng([self.noise_seed, 0x6A7, int(frame_index)])
-        y += rng.standard_normal(y.shape) * (self.noise_sigma_dn * top / 255.0)
-        return np.clip(np.rint(y), 0, top).astype(np.uint8 if bit_depth <= 8 else np.uint16)
+        twin's (:func:`~servoscope.simulate.render_parts.gray_frame`: the noise ``noise_sigma_dn`` of 8-bit DN
+        scaled to the depth, seeded per frame)."""
+        return gray_frame(clean, bit_depth, light_level, self.noise_sigma_dn, (self.noise_seed, 0x6A7, int(frame_index)))
 
 
 def pass_frames(renderer: RotorRenderer, passes: list[dict], n_frames: int, fps: Fraction,
