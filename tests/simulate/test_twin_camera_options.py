@@ -42,8 +42,10 @@ def test_default_frames_and_campaign_are_bit_identical_to_before(tmp_path):
     bandwidth, step = truth.pop("bandwidth_rad_s"), truth.pop("step")
     assert sorted(truth["video"]) == ["bit_rate", "codec", "exposure_s", "fps", "fps_rational", "gop", "height",
                                       "noise_sigma_dn", "width"]  # no option recorded
+    # Retaken once since: the servo's matrix exponential in plain loops, not numba's BLAS ``@``, moves the
+    # response's last bit (≤ 2.2e-16 rad); the videos did not change.
     assert hashlib.sha256(json.dumps(truth, sort_keys=True).encode()).hexdigest() == (
-        "bd7c2fbefff2b369e7917bcea8b1692bbfa29d47520910476734bbd2d8092e05")
+        "4bd60a47d6b95b7a8f68aa0793b21583e4360e83a17834219b136f4379001594")
     wn, zeta = truth["model"]["natural_frequency_rad_s"], truth["model"]["damping_ratio"]
     # |G(jω)|/K = 1/√2 of a 2nd-order system, and its overshoot exp(−πζ/√(1−ζ²)).
     assert bandwidth == pytest.approx(wn * math.sqrt(1 - 2 * zeta**2 + math.sqrt((1 - 2 * zeta**2) ** 2 + 1)), rel=1e-9)
