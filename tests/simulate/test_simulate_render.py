@@ -75,6 +75,20 @@ def test_disk_coverage_area_and_centroid_at_random_subpixel_positions():
         assert cov.min() >= 0.0 and cov.max() <= 1.0
 
 
+def test_signed_area_is_opencvs_oriented_contour_area():
+    import cv2
+
+    from servoscope.simulate.coverage import signed_area
+
+    rng = np.random.default_rng(11)
+    for n in (3, 4, 7, 40):
+        for _ in range(20):
+            xy = rng.uniform(-50, 50, size=(n, 2))
+            oracle = cv2.contourArea(xy.astype(np.float32), oriented=True)
+            assert signed_area(xy) == pytest.approx(oracle, rel=1e-5, abs=1e-3)
+            assert signed_area(xy[::-1]) == pytest.approx(-signed_area(xy), rel=1e-12, abs=1e-12)
+
+
 def test_rotated_rectangle_coverage_area_and_centroid():
     rng = np.random.default_rng(12)
     w, h = 60.3, 25.7

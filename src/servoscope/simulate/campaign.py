@@ -9,6 +9,7 @@ looks at it obliquely) and the LED level.
 from __future__ import annotations
 
 import cmath
+import functools
 import json
 import math
 
@@ -56,10 +57,17 @@ def step_metrics(servo: ServoModel) -> dict[str, float | None]:
     Uses ``control.step_info`` on a fine time grid (dead time excluded); None
     where undefined (unstable or integrating models).
     """
-    g = servo.transfer_function
-    poles = np.roots(servo.den)
+    return dict(_step_metrics(tuple(map(float, servo.num)), tuple(map(float, servo.den))))
+
+
+@functools.lru_cache(maxsize=64)
+def _step_metrics(num: tuple[float, ...], den: tuple[float, ...]) -> tuple[tuple[str, float | None], ...]:
+    # Cached by the coefficients: python-control's simulation loops over 20,001 samples in Python
+    # (~0.1 s), and a session renders many campaigns of a few servos.
+    g = control.tf(list(num), list(den))
+    poles = np.roots(den)
     if poles.size and np.max(poles.real) >= 0:
-        return {"rise_time_s": None, "overshoot_pct": None, "settling_time_s": None}
+        return (("rise_time_s", None), ("overshoot_pct", None), ("settling_time_s", None))
     slowest = np.min(np.abs(poles.real)) if poles.size else 1.0
     t = np.linspace(0.0, 12.0 / slowest, 20_001)
     info = control.step_info(g, t)
@@ -67,8 +75,8 @@ def step_metrics(servo: ServoModel) -> dict[str, float | None]:
     def clean(v: float) -> float | None:
         return float(v) if v is not None and math.isfinite(v) else None
 
-    return {"rise_time_s": clean(info["RiseTime"]), "overshoot_pct": clean(info["Overshoot"]),
-            "settling_time_s": clean(info["SettlingTime"])}
+    return (("rise_time_s", clean(info["RiseTime"])), ("overshoot_pct", clean(info["Overshoot"])),
+            ("settling_time_s", clean(info["SettlingTime"])))
 
 
 def exposure_averaged_response(servo, signal: InputSignal, time_s: np.ndarray, exposure_s: float,
