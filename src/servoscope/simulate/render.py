@@ -191,7 +191,7 @@ class FrameRenderer:
         if self.view is not None:
             xy = self.view.apply(xy)
         if self.camera is not None:
-            xy = self.camera.distort_points(xy)
+            xy = distort_fast(self.camera, xy)
         if self._fixed_led:
             n = len(self._all_uv)
             return np.split(xy[:n], self._splits) + np.split(xy[n:], [len(self._fixed_led[0])])
