@@ -136,11 +136,12 @@ def test_maestro_bytes_match_the_users_guide():
         get_protocol("pwm-board")
 
 
-def _drive_one_sine_dwell(workdir: Path) -> tuple[np.ndarray, np.ndarray, float]:
+def _drive_one_sine_dwell(workdir: Path) -> tuple[np.ndarray, np.ndarray, float] | None:
     """Drive a 2 s, 2 Hz dwell into a fresh fake Maestro and check every byte.
 
     Returns the fake's arrival − schedule errors (ms), the driver's logged
-    send − schedule errors (ms), and the driver's own max lateness (ms).
+    send − schedule errors (ms), and the driver's own max lateness (ms); None where the
+    driver stalled a period or more and skipped what was stale (the machine, not the driver).
     """
     workdir.mkdir()
     maestro = FakeMaestro()
@@ -173,6 +174,11 @@ def _drive_one_sine_dwell(workdir: Path) -> tuple[np.ndarray, np.ndarray, float]
     assert servo[0].time_s - t0_s < 1e-3
 
     n = int(2.0 * UPDATE_HZ)
+    if result.max_late_ms >= 1e3 / UPDATE_HZ and len(servo) < n + 2:
+        # The process stalled a period or more (a machine saturated beyond the suite's own two workers:
+        # seen once with a profiler and two other jobs on the 2 cores) and the driver sent what was due
+        # then, not a burst of stale commands: the schedule is not measurable on this attempt.
+        return None
     # n + 1 scheduled samples (the last one back at centre), then the centre sent with LED on.
     assert len(servo) == n + 2 and servo[-1].value == CENTRE_QUS
     servo = servo[: n + 1]
@@ -219,7 +225,12 @@ def test_sine_dwell_targets_timing_and_led(tmp_path, capsys, all_cores):
     fails every one.
     """
     for attempt in (1, 2, 3):
-        arrival_ms, sent_ms, max_late_ms = _drive_one_sine_dwell(tmp_path / f"attempt{attempt}")
+        measured = _drive_one_sine_dwell(tmp_path / f"attempt{attempt}")
+        if measured is None:
+            with capsys.disabled():
+                print(f"\nfake Maestro (attempt {attempt}): the driver stalled a period or more; measured again")
+            continue
+        arrival_ms, sent_ms, max_late_ms = measured
         with capsys.disabled():
             print(f"\nfake Maestro, 2 s at 50 Hz (attempt {attempt}): arrival − schedule: "
                   f"max |e| = {np.max(np.abs(arrival_ms)):.3f} ms (update {np.argmax(np.abs(arrival_ms))}), "
@@ -227,6 +238,7 @@ def test_sine_dwell_targets_timing_and_led(tmp_path, capsys, all_cores):
                   f"max |e| = {np.max(np.abs(sent_ms)):.3f} ms, max lateness {max_late_ms:.3f} ms")
         if np.max(np.abs(sent_ms)) < 2.0 and np.max(np.abs(arrival_ms)) < 2.0:
             break
+    assert measured is not None, "the driver stalled a period or more on its last attempt"
     assert np.max(np.abs(sent_ms)) < 2.0, "the driver's sends are off schedule"
     # Twice late on a saturated machine (a fresh clone's suite on 2 cores gave 3.6 ms on the last
     # update, its sends on time): the pty's delivery, not the driver; 19 of 20 arrive within 2 ms.
