@@ -24,6 +24,10 @@ centre, which converges on the truth.
 Where luma cannot tell the sticker (a luma contrast under :data:`MIN_LUMA_CONTRAST_DN`, or the sky
 just above or below the support: a sticker nearly as tall as the tip is thick) the caller keeps the
 kernel's coordinate, and its bias.
+
+:func:`chroma_row_centroid` measures such a sticker's height from the *native* 4:2:0 chroma rows
+instead (each the mean of two luma rows, sited between them), each row's split between its two luma
+rows taken from luma; measured on the twin, not used by the caller by default (its docstring says why).
 """
 
 from __future__ import annotations
@@ -33,7 +37,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["CHROMA_MARGIN_ROWS", "EDGE_SHARE", "LUMA_MARGIN_PX", "MIN_CHROMA_CONTRAST_DN", "MIN_LUMA_CONTRAST_DN",
+__all__ = ["CHROMA_EDGE_ALPHA", "CHROMA_MARGIN_ROWS", "EDGE_SHARE", "LUMA_MARGIN_PX", "MIN_CHROMA_CONTRAST_DN",
+           "MIN_LUMA_CONTRAST_DN", "MIN_SPLIT_CONTRAST_DN",
            "chroma_row_centroid", "luma_row_centroid"]
 
 #: Least |sticker luma − background| (DN) for the luma-only coordinate; below it the caller keeps the kernel's
@@ -171,19 +176,23 @@ def _luma_rows_nb(Y, cx, cy, hu, hv, m, ring, ym, var, lm, edge_share, min_contr
     return y, sigma
 
 
-
 #: Native chroma rows beyond those the sticker's extent reaches into, each side, in :func:`chroma_row_centroid`'s
-#: window. None on the twin: the tip's section leaves about one chroma row of blade above and below the blue
-#: sticker, and a margin row that takes in the section's edge (sky: 0.16 of the sticker's chroma contrast along
-#: its direction) costs more than the smear it would catch (noise-free raw sweep, rms 0.017 px with 1, 0.008 with 0).
+#: window. None: the twin's tip leaves about one chroma row of blade above and below its blue sticker, and a margin
+#: row takes in the section's edge (sky, 0.09-0.12 of the sticker's chroma contrast on average there). Noise-free
+#: raw sweep: rms 0.017 px with 1 row, 0.004 with none; on H.264 at 40 Mbit/s none cuts the codec's chroma smear
+#: above the sticker (mean α +0.009 a column in the row just above, raw +0.002): the height reads +0.012 px low
+#: (mean of 7 clips), a blade's pitch offset of ~−0.01° that does not change with the row.
 CHROMA_MARGIN_ROWS = 0
-#: Largest mean unmixed share of the sticker in the window's outer chroma rows where they lie beyond the sticker
-#: (a margin): the blade's, or the section's edge.
+#: Largest |mean chroma − the blade's| over the sticker's columns in the chroma row just beyond the window, as a
+#: share of the sticker's chroma contrast (with a 3σ noise floor); more: the section's edge is within a chroma row
+#: of the sticker and likely inside the window's end rows, no height. It refused 0-1 of 36-92 whole frames of the
+#: blue sticker on the twin's clips; a drawn sky 1-2 px beyond the sticker is refused at every row.
 CHROMA_EDGE_ALPHA = 0.05
 #: Least |sticker chroma − blade chroma| (DN) for :func:`chroma_row_centroid`.
 MIN_CHROMA_CONTRAST_DN = 20.0
 #: Least |sticker luma − blade luma| (DN) for the luma's split of each chroma row's two luma rows; below it the
-#: chroma rows are taken as they are (with the 2-px binning's bias, up to ±0.01 px on the twin's 14-px sticker).
+#: chroma rows are taken as they are, with the 2-px binning's bias (drawn 14-px disc: ±0.012 px unsplit, ≤ 0.0053
+#: split at the blue sticker's 17 DN of luma contrast, the rest the luma's 1-DN steps).
 MIN_SPLIT_CONTRAST_DN = 8.0
 
 
@@ -199,7 +208,15 @@ def chroma_row_centroid(Y: np.ndarray, U: np.ndarray, V: np.ndarray, cx: float, 
     row's own split between its two luma rows. That split (the 2-px binning's bias: ±0.01 px for a
     sharp-edged 14-px disc) is taken from luma's difference between the two rows, in which the blade's
     level cancels and whose noise enters with a lever of ±0.5 px, not the centroid's ±7 px. The window
-    is the whole chroma rows the sticker's extent reaches into: beyond them, on a tip, the section's edge.
+    is the whole chroma rows the sticker's extent reaches into (no margin, :data:`CHROMA_MARGIN_ROWS`):
+    beyond them, on a tip, the section's edge, which must not lie in the row just beyond
+    (:data:`CHROMA_EDGE_ALPHA`). The blade's chroma is the ring's sides' (as :func:`luma_row_centroid`'s
+    luma), one level for the window; the height is recentred as there.
+
+    Not used by :mod:`.passes` by default (docs/rotor.md, "The pitch's scale"): on the twin it halves the
+    per-pass pitch RMS of a 17-DN-luma sticker on raw yuv420p and removes its blade's row bias there and
+    on the 3-blade H.264 clip, but on H.264 the chroma smear it cuts leaves a constant offset, and on the
+    2-blade clips the per-pass RMS grew.
 
     Parameters
     ----------
@@ -224,23 +241,26 @@ def chroma_row_centroid(Y: np.ndarray, U: np.ndarray, V: np.ndarray, cx: float, 
     Returns
     -------
     (float, float)
-        ``(y_px, sigma_px)``; NaN, NaN where the window leaves the picture, the
-        ring's sides leave too few samples for the blade's chroma, the blade's chroma differs from the
-        sticker's by under :data:`MIN_CHROMA_CONTRAST_DN`, or a margin row (:data:`CHROMA_MARGIN_ROWS`) is
-        not the blade's.
+        ``(y_px, sigma_px)``; NaN, NaN where the window leaves the picture, the ring's sides leave too few
+        samples for the blade's chroma, the blade's chroma differs from the sticker's by under
+        :data:`MIN_CHROMA_CONTRAST_DN`, or the row just beyond the window is not the blade's.
     """
     ys, us, vs = (float(v) for v in sticker_yuv_dn)
     y, sigma = _chroma_rows_nb(Y, U, V, float(cx), float(cy), float(half_u_px), float(half_v_px), float(margin_px),
-                               ys, us, vs, float(chroma_var_dn2), float(luma_var_dn2), CHROMA_MARGIN_ROWS, CHROMA_EDGE_ALPHA,
-                               MIN_CHROMA_CONTRAST_DN, MIN_SPLIT_CONTRAST_DN if luma_split else math.inf,
-                               ITERATIONS)
+                               ys, us, vs, float(chroma_var_dn2), float(luma_var_dn2), CHROMA_MARGIN_ROWS,
+                               CHROMA_EDGE_ALPHA, MIN_CHROMA_CONTRAST_DN,
+                               MIN_SPLIT_CONTRAST_DN if luma_split else math.inf, ITERATIONS)
     return float(y), float(sigma)
 
 
 @njit(cache=True, nogil=True)
 def _chroma_rows_nb(Y, U, V, cx, cy, hu, hv, m, ym, um, vm, var, var_y, mrows, edge_alpha, min_contrast, min_split,
                     iterations):
-    """:func:`chroma_row_centroid`'s loops."""
+    """:func:`chroma_row_centroid`'s loops (compiled, as :func:`luma_row_centroid`'s).
+
+    Long because each recentring pass takes the blade's level, checks the rows beyond the window and sums
+    the moments over one window's indices; split, the parts would pass a dozen of them between them.
+    """
     hc, wc = U.shape
     # Chroma column i's centre is at luma 2i + 0.5. The ring's sides: 1.5 to 5.5 luma px beyond the support.
     reach_u = hu + m + 5.5
