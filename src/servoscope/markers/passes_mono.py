@@ -66,12 +66,11 @@ VIDEO_THRESHOLD_SPAN = 512
 
 
 def _coarse(frame) -> np.ndarray:
-    """Every 4th sample of every 4th row, in the samples' real levels."""
+    """Every 4th sample of every 4th row, as stored: a word's samples in its high bits are not shifted down,
+    as the mono kernel (``sample_at``) reads them and as the frame's ``white`` counts them."""
     rows = frame.samples[::4]
     if frame.packed:
         rows = unpack_rows(np.ascontiguousarray(rows), frame.width)
-    elif frame.shift:
-        rows = rows >> frame.shift
     return rows[:, ::4].astype(np.float32)
 
 
@@ -131,11 +130,10 @@ def coarse_threshold(path: str | Path) -> float:
 
 
 def _crop(frame, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
-    """The samples' real levels in rows y0:y1, columns x0:x1."""
+    """The samples in rows y0:y1, columns x0:x1, as stored (:func:`_coarse`: the levels the kernel reads)."""
     rows = frame.samples[y0:y1]
     if frame.packed:
         return unpack_rows(np.ascontiguousarray(rows), frame.width)[:, x0:x1].astype(np.float64)
-    rows = rows >> frame.shift if frame.shift else rows
     return rows[:, x0:x1].astype(np.float64)
 
 
