@@ -50,10 +50,10 @@ def test_pitch_per_pass_against_truth(clip):
     true = collective(table.time_s) + np.array(OFFSETS)[table.blade]
     err = table.pitch_rad - true
     rms_deg = math.degrees(math.sqrt(np.mean(err ** 2)))
-    assert rms_deg < 0.03  # measured 0.020° on this H.264 clip: docs/rotor.md
+    assert rms_deg < 0.025  # measured 0.0175° on this H.264 clip (0.0097–0.0199° over seeds 1–10): docs/rotor.md
     z = err / table.pitch_stderr_rad
-    assert 0.5 < math.sqrt(np.mean(z ** 2)) < 1.5  # measured 0.78
-    # The blade offset of 0.2° is seen (measured 0.190°).
+    assert 0.5 < math.sqrt(np.mean(z ** 2)) < 1.5  # measured 1.04 (0.43–1.04 over seeds 1–10: 10 passes scatter)
+    # The blade offset of 0.2° is seen (measured 0.201°; 0.181–0.201° over seeds 1–10).
     diff = np.mean(err[table.blade == 1] + OFFSETS[1]) - np.mean(err[table.blade == 0])
     assert abs(math.degrees(diff) - 0.2) < 0.03
 
