@@ -59,6 +59,20 @@ amplitude = 0.5
 """
 
 
+def mraw_in_high_bits(cih: Path, folder: Path) -> Path:
+    """A packed 12-bit MRAW saved again as Photron may: its samples in the high bits of 16-bit words
+    ("Color Bit : 16", "EffectiveBit Side : Higher"), levels 16x the packed file's; the new CIH's path."""
+    from servoscope.video.native import iter_native_frames
+
+    words = np.stack([f.gray for f in iter_native_frames(cih)]).astype(np.uint16) << 4
+    (folder / "high.mraw").write_bytes(words.astype("<u2").tobytes())
+    text = Path(cih).read_text().replace("Color Bit : 12", "Color Bit : 16").replace(
+        "EffectiveBit Side : Lower", "EffectiveBit Side : Higher")
+    assert "Color Bit : 16" in text and "Side : Higher" in text, "not a packed 12-bit MRAW's CIH"
+    (folder / "high.cih").write_text(text)
+    return folder / "high.cih"
+
+
 def kernel_frame(seed: int = 0, h: int = 96, w: int = 128) -> np.ndarray:
     """A synthetic yuv420p frame: textured grey background, a red and a green disk (anti-aliased), noise."""
     rng = np.random.default_rng(seed)

@@ -75,14 +75,10 @@ def test_samples_in_a_words_high_bits_track_as_the_packed_file(twins, tmp_path):
     """12-bit samples in the high bits of 16-bit words (Photron's "EffectiveBit Side : Higher") track as the
     same samples packed: the same centroids to the bit (the engine once read the sticker's level shifted down,
     16x below its threshold and ring, and ωn came 4.7 % low through `identify`)."""
+    from support import mraw_in_high_bits
+
     src, _, tracks = twins(1.0)
-    words = np.stack([f.gray for f in iter_native_frames(src)]).astype(np.uint16) << 4
-    (tmp_path / "high.mraw").write_bytes(words.astype("<u2").tobytes())
-    text = open(src).read()
-    text = text.replace("Color Bit : 12", "Color Bit : 16").replace("EffectiveBit Side : Lower", "EffectiveBit Side : Higher")
-    assert "Color Bit : 16" in text and "Side : Higher" in text
-    (tmp_path / "high.cih").write_text(text)
-    high = track_video(str(tmp_path / "high.cih"), TrackerSettings(**BRIGHT))
+    high = track_video(str(mraw_in_high_bits(src, tmp_path)), TrackerSettings(**BRIGHT))
     mono = tracks["mono"]
     for name in ("lead_xy_px", "trail_xy_px", "angle_rad", "valid"):
         assert np.array_equal(np.asarray(getattr(high, name)), np.asarray(getattr(mono, name)), equal_nan=name != "valid"), name

@@ -58,17 +58,11 @@ def test_mono_passes_against_truth(clip):
 def test_samples_in_a_words_high_bits_read_as_the_same_passes(clip, tmp_path):
     # A Photron camera may save 12-bit samples in the high bits of 16-bit words ("EffectiveBit Side : Higher"):
     # the same clip saved so must give the same passes, pitch and t0 (its levels are 16x the packed file's).
-    from servoscope.video.native import iter_native_frames
+    from support import mraw_in_high_bits
 
     rig, cih, truth, table = clip
-    words = np.stack([f.gray for f in iter_native_frames(cih)]).astype(np.uint16) << 4
-    (tmp_path / "high.mraw").write_bytes(words.astype("<u2").tobytes())
-    text = cih.read_text().replace("Color Bit : 12", "Color Bit : 16").replace("EffectiveBit Side : Lower",
-                                                                              "EffectiveBit Side : Higher")
-    assert "Color Bit : 16" in text and "Side : Higher" in text
-    (tmp_path / "high.cih").write_text(text)
-    high = track_passes(tmp_path / "high.cih", TrackerSettings(lead="bright", trail="bright", led="bright",
-                                                               exposure_s=EXPOSURE_S), rotor=BRIGHT)
+    settings = TrackerSettings(lead="bright", trail="bright", led="bright", exposure_s=EXPOSURE_S)
+    high = track_passes(mraw_in_high_bits(cih, tmp_path), settings, rotor=BRIGHT)
     assert len(high) == len(table)
     assert np.allclose(high.pitch_rad, table.pitch_rad, rtol=0, atol=1e-9)
     assert np.allclose(high.pitch_stderr_rad, table.pitch_stderr_rad, rtol=1e-6)

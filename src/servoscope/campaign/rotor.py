@@ -145,6 +145,7 @@ def rotor_step(campaign: Campaign, tables: dict[str, PassTable], model, warnings
     if t0 is None:
         warnings.append(f"{test.label}: step test without an input start (LED or t0_s): left out")
         return None, None
+
     def run_step(tf):
         return analyse_pass_step(table.time_s, table.blade, table.pitch_rad, t0_s=t0, step_size=test.amplitude,
                                  model=tf, t0_stderr_s=table.t0_uncertainty_s)

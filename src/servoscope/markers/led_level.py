@@ -106,9 +106,7 @@ def disk_level(Y, cx: float, cy: float, r: float) -> tuple[float, float]:
     mean of integer samples is exact in float64 either way, so the levels are
     NumPy's to the bit.
     """
-    if not (math.isfinite(cx) and math.isfinite(cy) and r > 0):
-        return math.nan, math.nan
-    return _disk_native(Y, False, Y.shape[1], float(cx), float(cy), float(r))
+    return disk_level_native(Y, False, Y.shape[1], cx, cy, r)
 
 
 def disk_level_native(samples: np.ndarray, packed: bool, width: int, cx: float, cy: float,

@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import ServoscopeError
-from ..video.native import NativeFrame, iter_native_frames, unpack_rows
+from ..video.native import NativeFrame, iter_native_frames
 from . import kernels as K
 from .centroid import SoftCentroid
 from .colour import BRIGHTNESS, BrightnessModel
@@ -100,11 +100,8 @@ def _core(frame: NativeFrame, m: Moments, r: float) -> np.ndarray:
     y0, y1 = int(max(0, math.floor(m.y_px - r))), int(min(h, math.ceil(m.y_px + r) + 1))
     yy, xx = np.mgrid[y0:y1, x0:x1]
     inside = (xx - m.x_px) ** 2 + (yy - m.y_px) ** 2 <= r * r
-    # As stored, as the kernel reads them (sample_at) and as frame.white counts them: a word's samples in its
-    # high bits left there (its ``gray`` shifts them down, 16x below the kernel's levels for 12 bits).
-    rows = frame.samples[y0:y1]
-    rows = unpack_rows(np.ascontiguousarray(rows), frame.width) if frame.packed else rows
-    return rows[:, x0:x1][inside].astype(np.float64)
+    # As stored, the kernel's levels (``gray`` shifts a word's high-bit samples down: 16x below them for 12 bits).
+    return frame.stored(slice(y0, y1))[:, x0:x1][inside].astype(np.float64)
 
 
 def _learn(tracker: MarkerTracker, frame: NativeFrame, m: Moments, margin_px: float) -> None:

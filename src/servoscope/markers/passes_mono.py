@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from ..video.frame_source import is_frame_source
-from ..video.native import NativeFrame, NativeSource, iter_native_frames, unpack_rows
+from ..video.native import NativeFrame, NativeSource, iter_native_frames
 from . import kernels as K
 from .kernel_mono import MONO_NP, MP, track_frame_mono
 from .led_level import LED_PEAK_FRAMES, disk_level_native
@@ -66,13 +66,9 @@ VIDEO_THRESHOLD_SPAN = 512
 
 
 def _coarse(frame) -> np.ndarray:
-    """Every 4th sample of every 4th row, as stored (a view where it can be: the samples' own type): a word's
-    samples in its high bits are not shifted down, as the mono kernel (``sample_at``) reads them and as the
-    frame's ``white`` counts them."""
-    rows = frame.samples[::4]
-    if frame.packed:
-        rows = unpack_rows(np.ascontiguousarray(rows), frame.width)
-    return rows[:, ::4]
+    """Every 4th sample of every 4th row, as stored (:meth:`~servoscope.video.native.NativeFrame.stored`, the
+    levels the mono kernel reads; a view where it can be, in the samples' own type)."""
+    return frame.stored(slice(None, None, 4))[:, ::4]
 
 
 def _spread_frames(path: Path):
@@ -132,10 +128,7 @@ def coarse_threshold(path: str | Path) -> float:
 
 def _crop(frame, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
     """The samples in rows y0:y1, columns x0:x1, as stored (:func:`_coarse`: the levels the kernel reads)."""
-    rows = frame.samples[y0:y1]
-    if frame.packed:
-        return unpack_rows(np.ascontiguousarray(rows), frame.width)[:, x0:x1].astype(np.float64)
-    return rows[:, x0:x1].astype(np.float64)
+    return frame.stored(slice(y0, y1))[:, x0:x1].astype(np.float64)
 
 
 def _sticker_pair(stats: np.ndarray, cents: np.ndarray, fixed: np.ndarray | None = None) -> np.ndarray:

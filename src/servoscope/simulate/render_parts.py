@@ -34,6 +34,15 @@ def _round_clip(v: np.float32) -> np.uint8:
     return np.uint8(np.int32(v))
 
 
+@njit(cache=True, inline="always")
+def _splitmix_draw(s: np.uint64) -> np.uint64:
+    # splitmix64's output mix of its counter: the sensor noise's draws (both noise kernels).
+    z = s
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
 @njit(cache=True)
 def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: np.uint64) -> None:
     """out = clip(round(work + noise), 0, 255) as uint8; noise = scaled_table[random index]."""
@@ -42,8 +51,6 @@ def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray,
     n = w.shape[0]
     s = state
     golden = np.uint64(0x9E3779B97F4A7C15)
-    m1 = np.uint64(0xBF58476D1CE4E5B9)
-    m2 = np.uint64(0x94D049BB133111EB)
     mask = np.uint64(0xFFFF)
     s16 = np.uint64(16)
     s32 = np.uint64(32)
@@ -52,10 +59,7 @@ def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray,
     for b in range(nblocks):
         # splitmix64: one 64-bit draw feeds four 16-bit table indices.
         s = s + golden
-        z = s
-        z = (z ^ (z >> np.uint64(30))) * m1
-        z = (z ^ (z >> np.uint64(27))) * m2
-        z = z ^ (z >> np.uint64(31))
+        z = _splitmix_draw(s)
         k = 4 * b
         if k + 4 <= n:
             o[k] = _round_clip(w[k] + scaled_table[np.intp(z & mask)])
@@ -65,14 +69,6 @@ def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray,
         else:
             for q in range(n - k):
                 o[k + q] = _round_clip(w[k + q] + scaled_table[np.intp((z >> np.uint64(16 * q)) & mask)])
-
-
-@njit(cache=True)
-def _splitmix_draw(s: np.uint64) -> np.uint64:
-    z = s
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
 
 
 @njit(cache=True)

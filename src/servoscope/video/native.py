@@ -141,9 +141,15 @@ class NativeFrame:
     @property
     def gray(self) -> np.ndarray:
         """The samples as a (height, width) array of their real bits (packed 12-bit unpacked, a word's shift undone)."""
-        if self.packed:
-            return unpack_rows(self.samples, self.width)
-        return self.samples >> self.shift if self.shift else self.samples
+        rows = self.stored()
+        return rows >> self.shift if self.shift else rows
+
+    def stored(self, rows: slice = slice(None)) -> np.ndarray:
+        """Rows of the samples as stored, as the compiled engines read them (:func:`sample_at`) and as
+        ``black`` and ``white`` count them: packed 12-bit unpacked, a word's samples left in its high bits
+        (:attr:`gray` shifts them down). A view where no unpacking is needed."""
+        part = self.samples[rows]
+        return unpack_rows(np.ascontiguousarray(part), self.width) if self.packed else part
 
     @property
     def rgb(self) -> np.ndarray:
