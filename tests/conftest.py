@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -10,20 +11,48 @@ import pytest
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
+def made_once(tmp_path_factory, name: str, make) -> Path:
+    """A folder ``make(folder)`` fills, made once for the whole run, whichever test worker asks first.
+
+    pytest-xdist's recipe for session fixtures: each worker is its own process with its own session, so a
+    session fixture is otherwise made once a worker. The first worker to ask makes the folder under a file
+    lock in the run's shared temporary folder; the others wait for the lock and find it made. Only files are
+    shared, never objects, and only what no test changes: a test that writes beside them writes its own names.
+    """
+    from filelock import FileLock
+
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        folder = tmp_path_factory.mktemp(name)
+        make(folder)
+        return folder
+    folder = tmp_path_factory.getbasetemp().parent / f"shared-{name}"
+    with FileLock(f"{folder}.lock"):
+        done = folder / ".made"
+        if not done.is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            make(folder)
+            done.touch()
+    return folder
+
+
 @pytest.fixture(scope="session")
 def quick_campaign(tmp_path_factory) -> Path:
-    """The 'quick' preset rendered once: path of its campaign.toml."""
+    """The 'quick' preset rendered once for the run: path of its campaign.toml."""
     from servoscope.simulate import simulate_campaign
 
-    return simulate_campaign(tmp_path_factory.mktemp("quick"), preset="quick", seed=3)
+    return made_once(tmp_path_factory, "quick", lambda folder: simulate_campaign(folder, preset="quick", seed=3)) \
+        / "campaign.toml"
 
 
 @pytest.fixture(scope="session")
-def quick_result(quick_campaign):
-    """The quick campaign identified once."""
-    from servoscope.campaign import identify, load_campaign
+def quick_result(quick_campaign, tmp_path_factory):
+    """The quick campaign identified once a worker, from tracks made once for the run (tracking is the cost)."""
+    from servoscope.campaign import identify, load_campaign, track_campaign
 
-    return identify(load_campaign(quick_campaign))
+    campaign = load_campaign(quick_campaign)
+    cache = made_once(tmp_path_factory, "quick-tracks", lambda folder: track_campaign(campaign, cache_dir=folder))
+    return identify(campaign, cache_dir=cache)
 
 
 

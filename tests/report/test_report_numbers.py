@@ -72,3 +72,49 @@ def test_figure_files_are_the_same_bytes_every_time(tmp_path):
         files.append((tmp_path / run / "fig.svg").read_bytes())
     assert b"<dc:date>" not in files[0]
     assert files[0] == files[1]
+
+
+@pytest.mark.parametrize("facecolor", ["white", "none"])
+def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor):
+    """The figure's PNG file holds the pixels ``savefig`` draws at the file's resolution (RGB where the figure is
+    opaque, RGBA where it is not), and the page's image is that picture shrunk to the page's resolution by
+    OpenCV's area averaging, not drawn again."""
+    import base64
+    import io
+    import re
+
+    import cv2
+    import matplotlib
+    import numpy as np
+    from PIL import Image
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from servoscope.report.html import FILE_DPI, PAGE_DPI, ReportSection
+
+    def figure():
+        fig, ax = plt.subplots(figsize=(5.3, 3.1), facecolor=facecolor)
+        ax.plot(np.linspace(0, 1, 50), np.sin(np.linspace(0, 9, 50)), label="sine")
+        ax.set_title("a title")
+        ax.legend()
+        return fig
+
+    expected_io = io.BytesIO()
+    drawn = figure()
+    drawn.savefig(expected_io, format="png", dpi=FILE_DPI)
+    plt.close(drawn)
+    expected = np.asarray(Image.open(expected_io).convert("RGBA"))
+    section = ReportSection("s", figures_dir=tmp_path)
+    section.figure(figure(), "caption", "alt", name="fig")
+    written = Image.open(tmp_path / "fig.png")
+    assert written.mode == ("RGB" if facecolor == "white" else "RGBA")
+    pixels = np.asarray(written.convert("RGBA"))
+    assert pixels.shape == expected.shape == (int(3.1 * FILE_DPI), int(5.3 * FILE_DPI), 4)
+    assert np.array_equal(pixels, expected)
+    page = re.search(r"base64,([A-Za-z0-9+/=]+)", "".join(section.html_parts)).group(1)
+    page_pixels = np.asarray(Image.open(io.BytesIO(base64.b64decode(page))))
+    scale = PAGE_DPI / FILE_DPI
+    size = (round(expected.shape[1] * scale), round(expected.shape[0] * scale))
+    shrunk = cv2.resize(np.asarray(written), size, interpolation=cv2.INTER_AREA)
+    assert np.array_equal(page_pixels, shrunk)

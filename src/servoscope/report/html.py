@@ -8,6 +8,7 @@ import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from matplotlib.figure import Figure
 
 from .._io import atomic_path
@@ -76,10 +77,9 @@ class ReportSection:
             # The same figures as files, for papers and slides: PNG and SVG. The page's image is the
             # file's PNG scaled down, not drawn a third time (drawing is most of a report's time).
             self.figures_dir.mkdir(parents=True, exist_ok=True)
-            buffer = io.BytesIO()
-            fig.savefig(buffer, format="png", dpi=FILE_DPI, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
+            pixels = _drawn(fig, FILE_DPI)
             with atomic_path(self.figures_dir / f"{name}.png") as tmp:
-                tmp.write_bytes(buffer.getvalue())
+                tmp.write_bytes(_png(pixels))
             # No date and fixed element ids: the same result gives the same bytes.
             import matplotlib
 
@@ -89,7 +89,7 @@ class ReportSection:
             import matplotlib.pyplot as plt
 
             plt.close(fig)
-            return _page_png_base64(buffer.getvalue())
+            return _page_png_base64(pixels)
         return figure_png_base64(fig)
 
     def warnings(self, items: list[str]) -> "ReportSection":
@@ -117,17 +117,39 @@ PAGE_DPI = 110
 PNG_COMPRESS_LEVEL = 1
 
 
-def _page_png_base64(png: bytes) -> str:
-    """A figure file's PNG at the page's resolution (Lanczos), base64-encoded."""
+def _drawn(fig: Figure, dpi: int) -> np.ndarray:
+    """The figure drawn as ``savefig`` draws it (its facecolor, layout engine and ``dpi``): RGB, or RGBA where
+    something is not opaque; uint8, shape (height, width, channels)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="rgba", dpi=dpi)
+    # The Agg canvas at that dpi: the figure's size in pixels, truncated as RendererAgg truncates it.
+    width, height = int(fig.get_figwidth() * dpi), int(fig.get_figheight() * dpi)
+    rgba = np.frombuffer(buffer.getbuffer(), dtype=np.uint8).reshape(height, width, 4)
+    # An opaque figure (the report's: white) written without its alpha channel: a quarter fewer bytes to compress.
+    return np.ascontiguousarray(rgba[..., :3]) if rgba[..., 3].min() == 255 else rgba
+
+
+def _png(pixels: np.ndarray) -> bytes:
     from PIL import Image
 
-    with Image.open(io.BytesIO(png)) as image:
-        scale = PAGE_DPI / FILE_DPI
-        small = image.resize((max(1, round(image.width * scale)), max(1, round(image.height * scale))),
-                             Image.Resampling.LANCZOS)
-        out = io.BytesIO()
-        small.save(out, format="png", compress_level=PNG_COMPRESS_LEVEL)
-    return base64.b64encode(out.getvalue()).decode("ascii")
+    out = io.BytesIO()
+    Image.fromarray(pixels).save(out, format="png", compress_level=PNG_COMPRESS_LEVEL)
+    return out.getvalue()
+
+
+def _page_png_base64(pixels: np.ndarray) -> str:
+    """A figure file's pixels at the page's resolution (pixel-area averaging), as a base64-encoded PNG.
+
+    From the file's own pixels, not drawn again: the page and the file show the same picture. Area
+    averaging is OpenCV's choice for shrinking; it is a third of PIL's Lanczos's time on a report's figures.
+    """
+    import cv2
+
+    scale = PAGE_DPI / FILE_DPI
+    height, width = pixels.shape[:2]
+    small = cv2.resize(pixels, (max(1, round(width * scale)), max(1, round(height * scale))),
+                       interpolation=cv2.INTER_AREA)
+    return base64.b64encode(_png(small)).decode("ascii")
 
 
 def figure_png_base64(fig: Figure, dpi: int = PAGE_DPI) -> str:
