@@ -107,8 +107,21 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
     figures_dir : Path, optional
         Also write every figure there as PNG and SVG.
     """
+    import matplotlib
+
     summary = result.summary()
-    sections = [
+    # Titles at the top of their axes (rc "axes.titley"), not placed by matplotlib's search above tick labels
+    # and offset texts, which it repeats at each of a figure's three draws (the layout, the PNG, the SVG): no
+    # report figure has ticks or labels above its axes, and the search was ~15 % of a report's time. The twin's
+    # reports' figures are the same to the pixel.
+    with matplotlib.rc_context({"axes.titley": 1.0}):
+        sections = _sections(result, summary, figures_dir)
+    return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}",
+                       [s for s in sections if s is not None])
+
+
+def _sections(result: "IdentificationResult", summary: dict, figures_dir: Path | None) -> list:
+    return [
         model_section(result, summary, figures_dir),
         frequency_response_section(result, figures_dir),
         sweep_section(result, figures_dir),
@@ -121,8 +134,6 @@ def build_report(result: "IdentificationResult", figures_dir: Path | None = None
         step_section(result, figures_dir),
         tracking_section(result, summary, figures_dir),
     ]
-    return render_html("servoscope report", f"{result.campaign.path} · servoscope {summary['servoscope_version']}",
-                       [s for s in sections if s is not None])
 
 
 def _fit_text(model) -> str:
