@@ -65,6 +65,30 @@ def test_rgb_to_yuv420p_agrees_with_ffmpeg():
     assert np.max(np.abs(ours - ref)) <= 1
 
 
+@pytest.mark.parametrize("shape", [(96, 128), (2, 2), (58, 86)])
+def test_rgb_to_yuv420p_is_the_bt601_equations_in_float32(shape):
+    """The conversion is BT.601's limited-range equations in float32, truncated after adding half, with each
+    chroma sample from its 2×2 block's sums: numpy's arithmetic of the same equations gives every sample to the
+    bit, over random, black, white and strided frames (the twin's videos depend on each bit)."""
+    h, w = shape
+    rng = np.random.default_rng(h * w)
+    wide = rng.integers(0, 256, (h + 4, w + 6, 3), dtype=np.uint8)
+    frames = [wide[:h, :w].copy(), np.zeros((h, w, 3), np.uint8), np.full((h, w, 3), 255, np.uint8),
+              wide[2:2 + h, 3:3 + w]]
+    for rgb in frames:
+        f = rgb.astype(np.float32)
+        r, g, b = f[..., 0], f[..., 1], f[..., 2]
+        y = np.float32(16.5) + (np.float32(65.481) * r + np.float32(128.553) * g + np.float32(24.966) * b) * np.float32(
+            1 / 255)
+        sums = f.reshape(h // 2, 2, w // 2, 2, 3).sum(axis=(1, 3), dtype=np.float32)
+        rs, gs, bs = sums[..., 0], sums[..., 1], sums[..., 2]
+        k = np.float32(0.25 / 255)
+        u = np.float32(128.5) + (np.float32(-37.797) * rs - np.float32(74.203) * gs + np.float32(112.0) * bs) * k
+        v = np.float32(128.5) + (np.float32(112.0) * rs - np.float32(93.786) * gs - np.float32(18.214) * bs) * k
+        planes = [p.astype(np.int32).astype(np.uint8).ravel() for p in (y, u, v)]
+        assert np.array_equal(rgb_to_yuv420p(rgb), np.concatenate(planes).reshape(h * 3 // 2, w))
+
+
 def test_writer_rejects_bad_arguments(tmp_path):
     with pytest.raises(ServoscopeError):
         VideoWriter(tmp_path / "a.mp4", 95, 64, 100)
