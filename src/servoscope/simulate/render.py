@@ -96,6 +96,7 @@ class FrameRenderer:
         self._dirty: list[tuple[int, int, int, int]] = []
         # Noise values pre-scaled to DN; float32 keeps the table in L2 cache.
         self._noise_table = (gaussian_table() * self.noise_sigma_dn).astype(np.float32)
+        self._noise_index = np.empty(0, dtype=np.uint16)
         # Blade-frame outlines of everything that moves, in compositing order.
         lead_uv, trail_uv = scene.sticker_centres_uv()
         k = scene.sticker_vertices
@@ -407,7 +408,9 @@ class FrameRenderer:
     def _finished(self, work: np.ndarray, frame_index: int) -> np.ndarray:
         out = np.empty(work.shape, dtype=np.uint8)
         state = np.random.SeedSequence([self.noise_seed, int(frame_index)]).generate_state(1, np.uint64)[0]
-        add_table_noise(work, out, self._noise_table, np.uint64(state))
+        if self._noise_index.size < work.size + 3:
+            self._noise_index = np.empty(work.size + 3, dtype=np.uint16)  # the kernel's scratch, kept
+        add_table_noise(work, out, self._noise_table, np.uint64(state), self._noise_index)
         return out
 
     def render(self, pitch_rad: float, led_level: float, frame_index: int = 0, lamp_gain: float = 1.0,

@@ -44,31 +44,31 @@ def _splitmix_draw(s: np.uint64) -> np.uint64:
 
 
 @njit(cache=True)
-def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: np.uint64) -> None:
-    """out = clip(round(work + noise), 0, 255) as uint8; noise = scaled_table[random index]."""
+def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray, state: np.uint64,
+                    index: np.ndarray) -> None:
+    """out = clip(round(work + noise), 0, 255) as uint8; noise = scaled_table[random index].
+
+    ``index``: uint16 scratch of at least ``work.size`` rounded up to a multiple of 4 entries.
+    """
     w = work.ravel()
     o = out.ravel()
     n = w.shape[0]
     s = state
     golden = np.uint64(0x9E3779B97F4A7C15)
     mask = np.uint64(0xFFFF)
-    s16 = np.uint64(16)
-    s32 = np.uint64(32)
-    s48 = np.uint64(48)
-    nblocks = (n + 3) // 4
-    for b in range(nblocks):
-        # splitmix64: one 64-bit draw feeds four 16-bit table indices.
+    # splitmix64: one 64-bit draw feeds four 16-bit table indices, low bits first. The indices first, then
+    # the table's reads in a loop of their own: the reads (a 256 KB table, from L2) bound the kernel, and
+    # apart from the draws they overlap; a 720x576 frame in 1.33-1.45 ms against 1.70-1.78 ms.
+    for b in range((n + 3) // 4):
         s = s + golden
         z = _splitmix_draw(s)
         k = 4 * b
-        if k + 4 <= n:
-            o[k] = _round_clip(w[k] + scaled_table[np.intp(z & mask)])
-            o[k + 1] = _round_clip(w[k + 1] + scaled_table[np.intp((z >> s16) & mask)])
-            o[k + 2] = _round_clip(w[k + 2] + scaled_table[np.intp((z >> s32) & mask)])
-            o[k + 3] = _round_clip(w[k + 3] + scaled_table[np.intp(z >> s48)])
-        else:
-            for q in range(n - k):
-                o[k + q] = _round_clip(w[k + q] + scaled_table[np.intp((z >> np.uint64(16 * q)) & mask)])
+        index[k] = np.uint16(z & mask)
+        index[k + 1] = np.uint16((z >> np.uint64(16)) & mask)
+        index[k + 2] = np.uint16((z >> np.uint64(32)) & mask)
+        index[k + 3] = np.uint16(z >> np.uint64(48))
+    for k in range(n):
+        o[k] = _round_clip(w[k] + scaled_table[np.intp(index[k])])
 
 
 @njit(cache=True)
