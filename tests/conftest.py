@@ -117,20 +117,21 @@ def all_cores():
         os.sched_setaffinity(0, pinned)
 
 
-# The files that take longest, longest first (pytest --durations on a fresh clone on the 2-core machine,
-# 2026-11-26, session 9): `make test` hands whole files to its two workers in collection order, so starting the
+# The files that take longest, longest first (their junit times in a fresh clone's run on the 2-core machine,
+# 2026-11-27, session 12): `make test` hands whole files to its two workers in collection order, so starting the
 # long ones first lets the short ones fill in at the end and both workers finish together (longest processing
 # time first).
 LONGEST_FIRST = [
-    "campaign/test_identify_twin_paper.py", "campaign/test_rotor_identify.py",
-    "test_identify_command.py", "video/test_video_formats.py", "sysid/test_linearity.py",
-    "markers/test_monochrome.py", "campaign/test_identify_sweep.py", "sysid/test_sysid_identify.py",
-    "campaign/test_joint.py", "campaign/test_plane_twin.py", "camera/test_timing_honesty.py", "sysid/test_modes.py",
-    "campaign/test_interrupted_run.py", "camera/test_rolling_shutter.py", "markers/test_gpu.py",
-    "camera/test_exposure_blur.py", "campaign/test_end_to_end.py", "campaign/test_joint_linear.py",
-    "report/test_report_browser.py", "simulate/test_twin_image_sequence.py", "video/test_memory.py",
-    "markers/test_reference_markers.py", "campaign/test_blade_motions.py", "sysid/test_servo_selection.py",
-    "sysid/test_sysid_held.py", "test_cli_errors.py", "test_bench.py", "sysid/test_heave_traces.py",
+    "campaign/test_identify_twin_paper.py", "campaign/test_rotor_identify.py", "sysid/test_servo_selection.py",
+    "test_identify_command.py", "camera/test_timing_honesty.py", "video/test_video_formats.py",
+    "sysid/test_sysid_identify.py", "campaign/test_identify_sweep.py", "sysid/test_modes.py",
+    "campaign/test_plane_twin.py", "camera/test_exposure_blur.py", "campaign/test_campaign_parallel.py",
+    "campaign/test_joint.py", "campaign/test_joint_linear.py", "sysid/test_linearity.py",
+    "campaign/test_end_to_end.py", "markers/test_gpu.py", "markers/test_reference_markers.py",
+    "campaign/test_joint_no_step.py", "markers/test_marker_selection.py", "campaign/test_interrupted_run.py",
+    "simulate/test_twin_camera_options.py", "markers/test_monochrome.py", "campaign/test_recorded_input.py",
+    "report/test_report_browser.py", "campaign/test_blade_motions.py", "simulate/test_rotor_twin.py",
+    "camera/test_rolling_shutter.py", "video/test_memory.py", "test_architecture.py",
 ]
 
 
