@@ -114,6 +114,21 @@ def test_photron_12bit_packing_matches_pymraw(tmp_path):
     assert np.array_equal(unpack_12bit(np.fromfile(path, np.uint8)).reshape(3, 8, 10), reference)
 
 
+def test_the_twins_12bit_packing_is_what_pymraw_reads(tmp_path):
+    from servoscope.errors import ServoscopeError
+    from servoscope.video.sequence_writer import pack_12bit
+
+    rng = np.random.default_rng(13)
+    values = rng.integers(0, 4096, size=(3, 8, 10)).astype(np.uint16)
+    values[0, 0, :4] = (0, 4095, 4095, 0)  # the extremes, in both places of a pair
+    path = tmp_path / "p.mraw"
+    pack_12bit(values).tofile(path)
+    assert path.stat().st_size == values.size * 3 // 2
+    assert np.array_equal(pyMRAW.load_images(str(path), 8, 10, 3, bit=12, roll_axis=False), values)
+    with pytest.raises(ServoscopeError, match="odd count"):
+        pack_12bit(np.zeros(5, np.uint16))
+
+
 # --- image sequences --------------------------------------------------------------------------
 
 def _colour_frames(n=6, h=20, w=30):

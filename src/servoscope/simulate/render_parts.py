@@ -73,28 +73,31 @@ def add_table_noise(work: np.ndarray, out: np.ndarray, scaled_table: np.ndarray,
 
 @njit(cache=True)
 def add_gray_table_noise(work: np.ndarray, out: np.ndarray, gain: np.float32, scaled_table: np.ndarray,
-                         top: np.float32, state: np.uint64) -> None:
+                         top: np.float32, state: np.uint64, index: np.ndarray) -> None:
     """out = clip(round(luma(work)·gain + noise), 0, top): a monochrome sensor's samples of a float32 RGB
-    picture (h, w, 3) in one pass; luma is BT.601's in float32 (:func:`~servoscope.markers.colour.luma_bt601`'s
-    products and sums, in its order), noise = scaled_table[random index] as :func:`add_table_noise` draws it."""
+    picture (h, w, 3); luma is BT.601's in float32 (:func:`~servoscope.markers.colour.luma_bt601`'s
+    products and sums, in its order), noise = scaled_table[random index] as :func:`add_table_noise` draws it
+    (the indices first, into ``index``: uint16 scratch of at least h·w rounded up to a multiple of 4)."""
     h, w = out.shape
     c0, c1, c2 = np.float32(0.299), np.float32(0.587), np.float32(0.114)
     golden = np.uint64(0x9E3779B97F4A7C15)
     mask = np.uint64(0xFFFF)
     s = state
-    z = np.uint64(0)
-    k = 0
+    for b in range((h * w + 3) // 4):
+        s = s + golden
+        z = _splitmix_draw(s)
+        k = 4 * b
+        index[k] = np.uint16(z & mask)
+        index[k + 1] = np.uint16((z >> np.uint64(16)) & mask)
+        index[k + 2] = np.uint16((z >> np.uint64(32)) & mask)
+        index[k + 3] = np.uint16(z >> np.uint64(48))
     for i in range(h):
+        row = index[i * w:(i + 1) * w]
         for j in range(w):
-            if k == 0:
-                # splitmix64: one 64-bit draw feeds four 16-bit table indices.
-                s = s + golden
-                z = _splitmix_draw(s)
             y = ((work[i, j, 0] * c0 + work[i, j, 1] * c1) + work[i, j, 2] * c2) * gain
-            v = y + scaled_table[np.intp((z >> np.uint64(16 * k)) & mask)] + np.float32(0.5)
+            v = y + scaled_table[np.intp(row[j])] + np.float32(0.5)
             v = min(max(v, np.float32(0.0)), top)
             out[i, j] = np.int32(v)
-            k = (k + 1) & 3
 
 
 @functools.lru_cache(maxsize=8)
@@ -119,7 +122,8 @@ def gray_frame(clean_rgb: np.ndarray, bit_depth: int, light_level: float, noise_
     out = np.empty(work.shape[:2], dtype=np.uint8 if bit_depth <= 8 else np.uint16)
     state = np.random.SeedSequence(list(seed)).generate_state(1, np.uint64)[0]
     add_gray_table_noise(work, out, np.float32(light_level * top / 255.0),
-                         _gray_noise_table(float(noise_sigma_dn) * top / 255.0), np.float32(top), np.uint64(state))
+                         _gray_noise_table(float(noise_sigma_dn) * top / 255.0), np.float32(top), np.uint64(state),
+                         np.empty(out.size + 3, dtype=np.uint16))
     return out
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from types import TracebackType
 
 import numpy as np
+from numba import njit
 
 from ..errors import ServoscopeError
 
@@ -109,12 +110,23 @@ def pack_12bit(samples: np.ndarray) -> np.ndarray:
 
     The inverse of :func:`servoscope.video.highspeed.unpack_12bit` (and of pyMRAW's reader).
     """
-    v = np.asarray(samples, dtype=np.uint16).reshape(-1, 2)
-    out = np.empty((v.shape[0], 3), np.uint8)
-    out[:, 0] = v[:, 0] >> 4
-    out[:, 1] = ((v[:, 0] & 15) << 4) | (v[:, 1] >> 8)
-    out[:, 2] = v[:, 1] & 255
-    return out.reshape(-1)
+    v = np.ascontiguousarray(samples, dtype=np.uint16).reshape(-1)
+    if v.size % 2:
+        raise ServoscopeError(f"12-bit samples are packed in pairs: {v.size} is an odd count")
+    out = np.empty(v.size // 2 * 3, np.uint8)
+    _pack_12bit(v, out)
+    return out
+
+
+@njit(cache=True)
+def _pack_12bit(v, out):  # pragma: no cover - numba
+    # One pass, no temporaries: numpy's six whole-frame operations took a seventh of a 12-bit twin's rendering.
+    for i in range(v.size // 2):
+        a = v[2 * i]
+        b = v[2 * i + 1]
+        out[3 * i] = np.uint8(a >> 4)
+        out[3 * i + 1] = np.uint8(((a & 15) << 4) | (b >> 8))
+        out[3 * i + 2] = np.uint8(b & 255)
 
 
 class MrawWriter:
