@@ -74,11 +74,15 @@ def test_figure_files_are_the_same_bytes_every_time(tmp_path):
     assert files[0] == files[1]
 
 
-@pytest.mark.parametrize("facecolor", ["white", "none"])
-def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor):
+@pytest.mark.parametrize("facecolor, size_in, size_px", [("white", (5.3, 3.1), (465, 795)),
+                                                         ("none", (5.3, 3.1), (465, 795)),
+                                                         ("white", (3.26, 2.26), (339, 489))])
+def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor, size_in, size_px):
     """The figure's PNG file holds the pixels ``savefig`` draws at the file's resolution (RGB where the figure is
     opaque, RGBA where it is not), and the page's image is that picture shrunk to the page's resolution by
-    OpenCV's area averaging, not drawn again."""
+    OpenCV's area averaging, not drawn again; without a figures folder, the page's image is what ``savefig``
+    draws at the page's resolution. 3.26 × 2.26 in at 150 dpi is 489 × 339 px on the canvas, where
+    int(3.26 · 150) is 488: the size is the canvas's, not recomputed."""
     import base64
     import io
     import re
@@ -94,7 +98,7 @@ def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor):
     from servoscope.report.html import FILE_DPI, PAGE_DPI, ReportSection
 
     def figure():
-        fig, ax = plt.subplots(figsize=(5.3, 3.1), facecolor=facecolor)
+        fig, ax = plt.subplots(figsize=size_in, facecolor=facecolor)
         ax.plot(np.linspace(0, 1, 50), np.sin(np.linspace(0, 9, 50)), label="sine")
         ax.set_title("a title")
         ax.legend()
@@ -110,7 +114,7 @@ def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor):
     written = Image.open(tmp_path / "fig.png")
     assert written.mode == ("RGB" if facecolor == "white" else "RGBA")
     pixels = np.asarray(written.convert("RGBA"))
-    assert pixels.shape == expected.shape == (int(3.1 * FILE_DPI), int(5.3 * FILE_DPI), 4)
+    assert pixels.shape == expected.shape == (*size_px, 4)
     assert np.array_equal(pixels, expected)
     page = re.search(r"base64,([A-Za-z0-9+/=]+)", "".join(section.html_parts)).group(1)
     page_pixels = np.asarray(Image.open(io.BytesIO(base64.b64decode(page))))
@@ -118,3 +122,13 @@ def test_figure_file_and_page_image_are_what_savefig_draws(tmp_path, facecolor):
     size = (round(expected.shape[1] * scale), round(expected.shape[0] * scale))
     shrunk = cv2.resize(np.asarray(written), size, interpolation=cv2.INTER_AREA)
     assert np.array_equal(page_pixels, shrunk)
+    # No figures folder: the page's image drawn once at the page's resolution, savefig's pixels.
+    page_io = io.BytesIO()
+    drawn = figure()
+    drawn.savefig(page_io, format="png", dpi=PAGE_DPI)
+    plt.close(drawn)
+    alone = ReportSection("s")
+    alone.figure(figure(), "caption", "alt")
+    page = re.search(r"base64,([A-Za-z0-9+/=]+)", "".join(alone.html_parts)).group(1)
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(base64.b64decode(page))).convert("RGBA")),
+                          np.asarray(Image.open(page_io).convert("RGBA")))

@@ -75,7 +75,7 @@ class ReportSection:
     def _encode(self, fig: Figure, name: str | None) -> str:
         if self.figures_dir is not None and name:
             # The same figures as files, for papers and slides: PNG and SVG. The page's image is the
-            # file's PNG scaled down, not drawn a third time (drawing is most of a report's time).
+            # file's pixels shrunk, not drawn a third time (drawing is most of a report's time).
             self.figures_dir.mkdir(parents=True, exist_ok=True)
             pixels = _drawn(fig, FILE_DPI)
             with atomic_path(self.figures_dir / f"{name}.png") as tmp:
@@ -122,8 +122,14 @@ def _drawn(fig: Figure, dpi: int) -> np.ndarray:
     something is not opaque; uint8, shape (height, width, channels)."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format="rgba", dpi=dpi)
-    # The Agg canvas at that dpi: the figure's size in pixels, truncated as RendererAgg truncates it.
-    width, height = int(fig.get_figwidth() * dpi), int(fig.get_figheight() * dpi)
+    # The canvas's size at that dpi, asked of the canvas at that dpi as savefig sets it: its rounding is its
+    # own (4.1 in at 110 dpi is 451 px, where int(4.1 * 110) is 450).
+    original = fig.dpi
+    fig.dpi = dpi
+    try:
+        width, height = fig.canvas.get_width_height(physical=True)
+    finally:
+        fig.dpi = original
     rgba = np.frombuffer(buffer.getbuffer(), dtype=np.uint8).reshape(height, width, 4)
     # An opaque figure (the report's: white) written without its alpha channel: a quarter fewer bytes to compress.
     return np.ascontiguousarray(rgba[..., :3]) if rgba[..., 3].min() == 255 else rgba
@@ -156,10 +162,9 @@ def figure_png_base64(fig: Figure, dpi: int = PAGE_DPI) -> str:
     """PNG bytes of a figure, base64-encoded for a data: URL; closes the figure."""
     import matplotlib.pyplot as plt
 
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
+    pixels = _drawn(fig, dpi)
     plt.close(fig)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
+    return base64.b64encode(_png(pixels)).decode("ascii")
 
 
 def render_html(title: str, subtitle: str, sections: list[ReportSection]) -> str:
