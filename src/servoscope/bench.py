@@ -269,7 +269,7 @@ def gpu_bench(path: Path, frames: int, check_frames: int = 16, batch: int = 256,
             classifier = gpu.GpuClassifier(params, height, width)
         if len(check) < check_frames:
             check.append(frame.i420)
-        chroma.append(np.concatenate((frame.u, frame.v), axis=None))  # chroma_of's layout, from the planes
+        chroma.append(classifier.chroma_from_planes(frame.u, frame.v))
         if len(chroma) == frames:
             break
     rates = gpu.measure_rates(classifier, np.stack(chroma), batch=batch, resident_passes=resident_passes)

@@ -96,8 +96,46 @@ _SIMULATED = """
     cpu = gpu.class_moments_cpu(wide, both)
     assert cpu[:, :, 0].min() > 0
     np.testing.assert_array_equal(gpu.GpuClassifier(both, 48, 544, threads=64).class_moments(wide), cpu)
+    # Chroma rows that are not whole 32-bit words (100 px: 50 samples, laid out as 13 words with 2 padding
+    # samples), 3 markers (4 bits a table entry, one unused), windows that start and end inside a word.
+    odd = rng.integers(0, 256, size=(2, 36 * 3 // 2, 100), dtype=np.uint8)
+    three = np.vstack([gpu.bench_params(TrackerSettings("#d62728", "#2ca02c"), 100, 36),
+                       gpu.bench_params(TrackerSettings("#1f77b4", "#2ca02c"), 100, 36)[:1]])
+    three[1, [K.P.X0, K.P.Y0, K.P.X1, K.P.Y1]] = (6, 3, 90, 33)
+    cpu = gpu.class_moments_cpu(odd, three)
+    assert cpu[:, :, 0].min() > 0
+    padded = gpu.GpuClassifier(three, 36, 100, threads=32, rows_per_block=5)
+    assert padded.row_words == 13 and padded.chroma_bytes == 2 * 18 * 52
+    laid = padded.chroma_of(odd)
+    np.testing.assert_array_equal(laid[1], padded.chroma_from_planes(odd[1, 36:54].reshape(-1)[:900].reshape(18, 50),
+                                                                     odd[1, 36:54].reshape(-1)[900:].reshape(18, 50)))
+    np.testing.assert_array_equal(padded.class_moments(odd), cpu)
     print("ok")
 """
+
+
+@pytest.mark.parametrize("n_markers", [1, 2, 3, 4])
+def test_packed_class_table_holds_each_markers_class_bit_for_bit(n_markers):
+    # The kernel's one table: entry u·256 + v has a bit a marker, read as the kernel reads it.
+    sys.path.insert(0, TESTS)
+    from support import kernel_frame as _frame, kernel_params as _params
+
+    from servoscope.markers import TrackerSettings, gpu
+
+    params = np.vstack([_params(_frame(0)), gpu.bench_params(TrackerSettings("#1f77b4", "#ff7f0e"))])[:n_markers]
+    tables = gpu.class_tables(params)
+    packed = gpu.packed_class_table(params)
+    bits = gpu.table_bits(n_markers)
+    assert packed.dtype == np.uint32 and packed.size == 65536 * bits // 32
+    uv = np.arange(65536)
+    per_word = 32 // bits
+    entry = (packed[uv // per_word] >> ((uv % per_word) * bits).astype(np.uint32)) & ((1 << bits) - 1)
+    for k in range(n_markers):
+        want = (tables[k, uv >> 5] >> (uv & 31).astype(np.uint32)) & 1
+        np.testing.assert_array_equal((entry >> k) & 1, want)
+    assert not np.any(entry >> n_markers)  # no bit beyond the markers'
+    with pytest.raises(ValueError, match="1 to 4 markers"):
+        gpu.table_bits(5)
 
 
 def test_gpu_sums_equal_the_cpu_reference_in_the_simulator():
@@ -131,9 +169,9 @@ _PTX = """
     from servoscope.markers import gpu
     assert gpu.NVVM_WHEEL, "the nvidia-cuda-nvcc-cu12 wheel was not found"
     a = lambda dtype, ndim: types.Array(dtype, ndim, "C")
-    sig = (a(types.uint8, 2), types.int64, types.int64, types.int64, types.int64, a(types.uint32, 2),
+    sig = (a(types.uint32, 2), types.int64, types.int64, types.int64, a(types.uint32, 1),
            a(types.int64, 2), a(types.int64, 1), a(types.int64, 3))
-    ptx, _ = cuda.compile_ptx(gpu.class_sums_kernel().py_func, sig, cc=(9, 0))
+    ptx, _ = cuda.compile_ptx(gpu.class_sums_kernel(gpu.THREADS, gpu.ROWS_PER_BLOCK, 3).py_func, sig, cc=(9, 0))
     print(ptx)
 """
 
@@ -150,6 +188,11 @@ def test_gpu_kernel_compiles_to_ptx_for_an_h100():
     assert "ld.shared.u32" in ptx and "bar.sync" in ptx
     assert "atom.global.add.u64" in ptx
     assert ".f64" not in ptx  # no floating point in the pass at all
+    # The markers' sums and windows stay in registers: no local (stack) memory. (Indexed by a marker count known
+    # only at run time, they were in local memory, read and written at every sample.)
+    assert "ld.local" not in ptx and "st.local" not in ptx
+    # The chroma is read as 32-bit words, 4 samples a load.
+    assert "ld.global.u32" in ptx and "ld.global.u8" not in ptx
 
 
 _BENCH = """
