@@ -110,6 +110,15 @@ _SIMULATED = """
     np.testing.assert_array_equal(laid[1], padded.chroma_from_planes(odd[1, 36:54].reshape(-1)[:900].reshape(18, 50),
                                                                      odd[1, 36:54].reshape(-1)[900:].reshape(18, 50)))
     np.testing.assert_array_equal(padded.class_moments(odd), cpu)
+    if not numba.config.ENABLE_CUDASIM:
+        # On a GPU: a block larger than the 4-marker kernel's registers allow is refused before any launch,
+        # with what to choose (an H100 runs it with 512 threads, not 1024).
+        try:
+            gpu.GpuClassifier(params, h, w, threads=1024)
+        except ValueError as exc:
+            assert "threads a block are more than this GPU runs the 4-marker pass with" in str(exc), exc
+        else:
+            assert gpu.class_sums_kernel(1024, gpu.ROWS_PER_BLOCK, 4).get_max_threads_per_block() >= 1024
     print("ok")
 """
 

@@ -55,7 +55,8 @@ __all__ = ["cuda_available", "require_cuda", "class_tables", "packed_class_table
 #: Threads per block (a power of two, for the tree reduction). Measured on an H100 (session 13; 720x576,
 #: the bench's 2 markers, batches of 256 frames in GPU memory, frames/s, benchmarks/gpu_launch_shapes.py):
 #: 256 threads 1.98-2.19M, 512 threads 2.12-2.23M, 1024 threads 1.70-2.21M over 72, 144 and 288 rows a
-#: block. With 4 markers 1024 threads do not launch (too many registers a thread for a block that size).
+#: block. The kernel's registers a thread (48-56 for 1-2 markers, 66 for 3, 76 for 4; no local memory) allow
+#: 1024 threads a block for 1-2 markers, 896 for 3 and 768 for 4: a larger block is refused (ValueError).
 THREADS = 512
 #: Chroma rows per block. Each block first loads the class table (8-32 kB, from the L2 cache) into
 #: shared memory, so the more rows a block reads the less that load weighs: on the H100, 512 threads
@@ -313,6 +314,26 @@ def class_sums_kernel(threads: int = THREADS, rows_per_block: int = ROWS_PER_BLO
     return kernel
 
 
+def _check_block_fits(kernel, threads: int, n_markers: int) -> None:
+    """Compile the kernel now (as its first launch would) and refuse a block larger than it can run.
+
+    A kernel's registers a thread bound its threads a block: on an H100 the 4-marker pass does not launch
+    with 1024 threads. CUDA's own launch error names arguments or registers without saying which; this
+    says what to choose. numba's simulator has no registers and is not checked.
+    """
+    from numba import config, types
+
+    if config.ENABLE_CUDASIM:
+        return
+    a = lambda dtype, ndim: types.Array(dtype, ndim, "C")  # noqa: E731 - the kernel's argument types
+    most = kernel.compile((a(types.uint32, 2), types.int64, types.int64, types.int64, a(types.uint32, 1),
+                           a(types.int64, 2), a(types.int64, 1), a(types.int64, 3))).max_threads_per_block
+    if threads > most:
+        raise ValueError(f"{threads} threads a block are more than this GPU runs the {n_markers}-marker pass "
+                         f"with (at most {most}, for the kernel's registers): choose {1 << (most.bit_length() - 1)} "
+                         f"or fewer")
+
+
 def _union_box(windows: np.ndarray) -> np.ndarray:
     live = windows[(windows[:, 1] > windows[:, 0]) & (windows[:, 3] > windows[:, 2])]
     if not len(live):
@@ -357,6 +378,7 @@ class GpuClassifier:
         self.n_markers = params.shape[0]
         self._kernel = class_sums_kernel(int(threads), int(rows_per_block), self.n_markers)
         self.threads, self.rows_per_block, self.frame_blocks = int(threads), int(rows_per_block), int(frame_blocks)
+        _check_block_fits(self._kernel, self.threads, self.n_markers)
         self.height, self.width = int(height), int(width)
         self.hc, self.wc = self.height // 2, self.width // 2
         #: 32-bit words of one chroma row on the GPU (4 samples each, the row padded to a whole word).
