@@ -107,8 +107,8 @@ _SIMULATED = """
     padded = gpu.GpuClassifier(three, 36, 100, threads=32, rows_per_block=5)
     assert padded.row_words == 13 and padded.chroma_bytes == 2 * 18 * 52
     laid = padded.chroma_of(odd)
-    np.testing.assert_array_equal(laid[1], padded.chroma_from_planes(odd[1, 36:54].reshape(-1)[:900].reshape(18, 50),
-                                                                     odd[1, 36:54].reshape(-1)[900:].reshape(18, 50)))
+    u, v = odd[1, 36:].reshape(2, 18, 50)
+    np.testing.assert_array_equal(laid[1], padded.chroma_from_planes(u, v))
     np.testing.assert_array_equal(padded.class_moments(odd), cpu)
     if not numba.config.ENABLE_CUDASIM:
         # On a GPU: a block larger than the 4-marker kernel's registers allow is refused before any launch,
@@ -174,13 +174,11 @@ def test_gpu_classifier_needs_a_gpu():
 
 
 _PTX = """
-    from numba import cuda, types
+    from numba import cuda
     from servoscope.markers import gpu
     assert gpu.NVVM_WHEEL, "the nvidia-cuda-nvcc-cu12 wheel was not found"
-    a = lambda dtype, ndim: types.Array(dtype, ndim, "C")
-    sig = (a(types.uint32, 2), types.int64, types.int64, types.int64, a(types.uint32, 1),
-           a(types.int64, 2), a(types.int64, 1), a(types.int64, 3))
-    ptx, _ = cuda.compile_ptx(gpu.class_sums_kernel(gpu.THREADS, gpu.ROWS_PER_BLOCK, 3).py_func, sig, cc=(9, 0))
+    ptx, _ = cuda.compile_ptx(gpu.class_sums_kernel(gpu.THREADS, gpu.ROWS_PER_BLOCK, 3).py_func,
+                              gpu.kernel_signature(), cc=(9, 0))
     print(ptx)
 """
 

@@ -49,7 +49,7 @@ from . import kernels as K
 __all__ = ["cuda_available", "require_cuda", "class_tables", "packed_class_table", "table_bits", "as_words",
            "chroma_windows", "class_moments_cpu", "moments_from_sums",
            "GpuClassifier", "measure_rates", "bench_params", "THREADS", "ROWS_PER_BLOCK", "FRAME_BLOCKS",
-           "MAX_MARKERS", "class_sums_kernel",
+           "MAX_MARKERS", "class_sums_kernel", "kernel_signature",
            "NVVM_WHEEL"]
 
 #: Threads per block (a power of two, for the tree reduction). Measured on an H100 (session 13; 720x576,
@@ -314,6 +314,17 @@ def class_sums_kernel(threads: int = THREADS, rows_per_block: int = ROWS_PER_BLO
     return kernel
 
 
+def kernel_signature() -> tuple:
+    """The argument types :func:`class_sums_kernel`'s kernel is launched with, to compile it without a launch."""
+    from numba import types
+
+    def c_array(dtype, ndim):
+        return types.Array(dtype, ndim, "C")
+
+    return (c_array(types.uint32, 2), types.int64, types.int64, types.int64, c_array(types.uint32, 1),
+            c_array(types.int64, 2), c_array(types.int64, 1), c_array(types.int64, 3))
+
+
 def _check_block_fits(kernel, threads: int, n_markers: int) -> None:
     """Compile the kernel now (as its first launch would) and refuse a block larger than it can run.
 
@@ -321,13 +332,11 @@ def _check_block_fits(kernel, threads: int, n_markers: int) -> None:
     with 1024 threads. CUDA's own launch error names arguments or registers without saying which; this
     says what to choose. numba's simulator has no registers and is not checked.
     """
-    from numba import config, types
+    from numba import config
 
     if config.ENABLE_CUDASIM:
         return
-    a = lambda dtype, ndim: types.Array(dtype, ndim, "C")  # noqa: E731 - the kernel's argument types
-    most = kernel.compile((a(types.uint32, 2), types.int64, types.int64, types.int64, a(types.uint32, 1),
-                           a(types.int64, 2), a(types.int64, 1), a(types.int64, 3))).max_threads_per_block
+    most = kernel.compile(kernel_signature()).max_threads_per_block
     if threads > most:
         raise ValueError(f"{threads} threads a block are more than this GPU runs the {n_markers}-marker pass "
                          f"with (at most {most}, for the kernel's registers): choose {1 << (most.bit_length() - 1)} "
@@ -396,22 +405,20 @@ class GpuClassifier:
 
     def chroma_from_planes(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(chroma_bytes,) uint8: one frame's U and V planes (hc, wc each) laid out for the GPU."""
-        if self.row_words * 4 == self.wc:
-            return np.concatenate((u, v), axis=None).astype(np.uint8, copy=False)
-        out = np.zeros((2, self.hc, 4 * self.row_words), dtype=np.uint8)
-        out[0, :, :self.wc] = u
-        out[1, :, :self.wc] = v
-        return out.reshape(-1)
+        return self._laid_out(np.stack((u, v))[None])[0]
 
     def chroma_of(self, i420: np.ndarray) -> np.ndarray:
         """(frames, chroma_bytes) uint8: the chroma planes of (frames, h·3/2, w) yuv420p frames, laid out for the GPU."""
         i420 = np.asarray(i420, dtype=np.uint8)
-        planes = i420[:, self.height:, :].reshape(i420.shape[0], 2, self.hc, self.wc)
+        return self._laid_out(i420[:, self.height:, :].reshape(i420.shape[0], 2, self.hc, self.wc))
+
+    def _laid_out(self, planes: np.ndarray) -> np.ndarray:
+        """(frames, chroma_bytes) uint8 from (frames, 2, hc, wc) planes: rows padded to whole words where needed."""
         if self.row_words * 4 == self.wc:
-            return np.ascontiguousarray(planes).reshape(i420.shape[0], self.chroma_bytes)
-        out = np.zeros((i420.shape[0], 2, self.hc, 4 * self.row_words), dtype=np.uint8)
+            return np.ascontiguousarray(planes, dtype=np.uint8).reshape(planes.shape[0], self.chroma_bytes)
+        out = np.zeros(planes.shape[:3] + (4 * self.row_words,), dtype=np.uint8)
         out[..., :self.wc] = planes
-        return out.reshape(i420.shape[0], self.chroma_bytes)
+        return out.reshape(planes.shape[0], self.chroma_bytes)
 
     def launch(self, d_chroma, d_sums, frames: int, stream=0) -> None:
         """Queue the pass over ``frames`` frames of device chroma into zeroed device sums (frames, markers, 3).
@@ -478,7 +485,7 @@ def measure_rates(classifier: GpuClassifier, chroma: np.ndarray, batch: int = 25
     batch = max(1, min(batch, n))
     shape = (classifier.n_markers, 3)
     words = as_words(chroma)
-    d_batch = cuda.to_device(np.ascontiguousarray(words[:batch]))
+    d_batch = cuda.to_device(words[:batch])
     d_sums = cuda.to_device(np.zeros((batch,) + shape, dtype=np.int64))
     classifier.launch(d_batch, d_sums, batch)  # compile before timing
     cuda.synchronize()
